@@ -1,0 +1,63 @@
+"""The `regrasp` command: a thin click layer that parses, calls the library and prints.
+
+Domain errors (:class:`~regrasp_cli.errors.RegraspError`) become one line on stderr and
+their exit code (2 for bad input); ``--debug`` shows the traceback instead.  Heavy
+imports (pinocchio, trimesh) happen inside the subcommands so ``--help`` is instant.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from pathlib import Path
+
+import click
+
+from regrasp_cli import __version__
+from regrasp_cli.errors import RegraspError
+
+
+class RegraspGroup(click.Group):
+    """Turns domain errors into one clear line and an exit code."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except RegraspError as exc:
+            if ctx.obj and ctx.obj.get("debug"):
+                raise
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(exc.exit_code)
+
+
+@click.group(cls=RegraspGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="regrasp")
+@click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
+@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=Path("cache"),
+              show_default=True, envvar="REGRASP_CACHE", help="Where cached artefacts are kept.")
+@click.pass_context
+def main(ctx: click.Context, debug: bool, cache_dir: Path) -> None:
+    """Plan pick-and-place tasks with two-hand regrasping for dual-arm robots
+    (Saut et al., IROS 2010)."""
+    ctx.obj = {"debug": debug, "cache_dir": cache_dir}
+    if not debug:
+        warnings.showwarning = _warning_line
+
+
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    click.echo(f"warning: {message}", err=True)
+
+
+@main.command()
+@click.argument("scene", type=click.Path(path_type=Path))
+@click.option("--seed", type=int, default=None, help="Random seed (default: the scene's planning.seed).")
+@click.pass_context
+def info(ctx: click.Context, scene: Path, seed: int | None) -> None:
+    """Summarise a scene: robot, collision pairs, obstacles, object, reachability."""
+    from regrasp_cli.report import print_info
+
+    print_info(scene, ctx.obj["cache_dir"], seed)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

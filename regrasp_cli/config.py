@@ -1,0 +1,453 @@
+"""YAML configuration files -> frozen dataclasses, with precise errors.
+
+Two formats (see DESIGN.md): ``regrasp.robot/1`` (robot.yaml: URDF, joint groups, hands,
+rest configuration, extra disabled collision pairs) and ``regrasp.scene/1`` (scene.yaml:
+robot, object, static obstacles, task, planning options).  Parsing checks only the shape
+of the data; names are checked against the URDF when the robot is built
+(:mod:`regrasp_cli.model.robot`).  Every error is an :class:`InputError` naming the file,
+the dotted field and what was expected.  Relative paths are resolved against the
+directory of the file that names them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import yaml
+
+from regrasp_cli.errors import InputError
+from regrasp_cli.spatial import pose_matrix
+
+ROBOT_FORMAT = "regrasp.robot/1"
+SCENE_FORMAT = "regrasp.scene/1"
+HAND_SIDES = ("right", "left")
+ARM_OF_HAND = {"right": "right_arm", "left": "left_arm"}
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_yaml(path: str | Path) -> tuple[Path, dict]:
+    """Read a YAML mapping; errors name the file (and the line for syntax errors)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, None, "no such file")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise InputError(path, None, f"YAML syntax error{where}: {problem}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(path, None, f"cannot read the file ({exc})") from None
+    if not isinstance(data, dict):
+        raise InputError(path, None, f"expected a YAML mapping at the top level, found {_kind(data)}")
+    return path.resolve(), data
+
+
+def _kind(v: Any) -> str:
+    return "nothing" if v is None else type(v).__name__
+
+
+class Fields:
+    """Typed access to one mapping of a YAML file; every error names file and field."""
+
+    def __init__(self, file: Path, data: Any, where: str = ""):
+        self.file, self.where = file, where
+        if not isinstance(data, dict):
+            raise InputError(file, where or None, f"expected a mapping, found {_kind(data)}")
+        self.data = data
+
+    def path(self, key: str) -> str:
+        return f"{self.where}.{key}" if self.where else key
+
+    def error(self, key: str | None, message: str) -> InputError:
+        return InputError(self.file, self.path(key) if key else (self.where or None), message)
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def only(self, *allowed: str) -> None:
+        unknown = sorted(set(map(str, self.data)) - set(allowed))
+        if unknown:
+            raise self.error(unknown[0], f"unknown key; expected one of: {', '.join(allowed)}")
+
+    def raw(self, key: str) -> Any:
+        if key not in self.data:
+            raise self.error(key, "missing required key")
+        return self.data[key]
+
+    def sub(self, key: str) -> "Fields":
+        return Fields(self.file, self.raw(key), self.path(key))
+
+    def str(self, key: str, default: Any = ...) -> str:
+        if default is not ... and key not in self.data:
+            return default
+        v = self.raw(key)
+        if not isinstance(v, str) or not v:
+            raise self.error(key, f"expected a non-empty string, found {_kind(v)}")
+        return v
+
+    def int(self, key: str, default: Any = ..., minimum: int | None = None) -> int:
+        if default is not ... and key not in self.data:
+            return default
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.error(key, f"expected an integer, found {_kind(v)}")
+        if minimum is not None and v < minimum:
+            raise self.error(key, f"expected an integer >= {minimum}, found {v}")
+        return v
+
+    def float(self, key: str, default: Any = ..., positive: bool = False) -> float:
+        if default is not ... and key not in self.data:
+            return default
+        v = self.raw(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.error(key, f"expected a finite number, found {v!r}")
+        if positive and v <= 0:
+            raise self.error(key, f"expected a number > 0, found {v}")
+        return float(v)
+
+    def vector(self, key: str, n: int | None = None, positive: bool = False) -> tuple[float, ...]:
+        return as_vector(self.file, self.path(key), self.raw(key), n, positive)
+
+    def names(self, key: str, default: Any = ...) -> tuple[str, ...]:
+        if default is not ... and key not in self.data:
+            return default
+        v = self.raw(key)
+        if not isinstance(v, list) or not all(isinstance(s, str) and s for s in v):
+            raise self.error(key, "expected a list of names (strings)")
+        return tuple(v)
+
+
+def as_vector(file, where: str, v: Any, n: int | None = None, positive: bool = False) -> tuple[float, ...]:
+    ok = isinstance(v, list) and all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v
+    )
+    if not ok or (n is not None and len(v) != n):
+        shape = f"a list of {n} numbers" if n else "a list of numbers"
+        raise InputError(file, where, f"expected {shape}, found {v!r}")
+    if positive and any(x <= 0 for x in v):
+        raise InputError(file, where, f"expected numbers > 0, found {v!r}")
+    return tuple(float(x) for x in v)
+
+
+def parse_pose(fields: Fields, key: str) -> np.ndarray:
+    """``{xyz: [x,y,z], rpy: [r,p,y]}`` or ``{xyz, quat: [x,y,z,w]}`` -> 4x4 (m, rad)."""
+    f = fields.sub(key)
+    f.only("xyz", "rpy", "quat")
+    xyz = f.vector("xyz", 3)
+    if f.has("rpy") and f.has("quat"):
+        raise f.error("quat", "give either rpy or quat, not both")
+    if f.has("quat"):
+        quat = np.array(f.vector("quat", 4))
+        norm = np.linalg.norm(quat)
+        if norm < 1e-9:
+            raise f.error("quat", "quaternion of zero norm; expected [x, y, z, w] with norm 1")
+        return pose_matrix(xyz, quat=quat / norm)
+    rpy = f.vector("rpy", 3) if f.has("rpy") else (0.0, 0.0, 0.0)
+    return pose_matrix(xyz, rpy=rpy)
+
+
+def resolve_path(file: Path, where: str, value: str, must_exist: bool = True) -> Path:
+    """A path relative to the directory of ``file``; ``package://`` URIs pass through."""
+    if value.startswith("package://"):
+        return Path(value)
+    p = Path(value)
+    p = p if p.is_absolute() else (file.parent / p)
+    if must_exist and not p.exists():
+        raise InputError(file, where, f"no such file: {p}")
+    return p.resolve() if p.exists() else p
+
+
+# --------------------------------------------------------------------------- robot.yaml
+
+
+@dataclass(frozen=True)
+class FingerSpec:
+    """One finger: its joint chain (root to tip), the fingertip link and sphere radius (m)."""
+
+    name: str
+    joints: tuple[str, ...]
+    tip_link: str
+    tip_radius: float
+    open: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class HandSpec:
+    """A hand: its side, the arm group it is mounted on, grasp frame and fingers.
+
+    ``contact`` is the contact model for force closure: ``point`` (point contact with
+    friction) or ``soft`` (soft finger, for parallel-jaw grippers).
+    """
+
+    side: str
+    arm: str
+    grasp_frame: str
+    fingers: tuple[FingerSpec, ...]
+    contact: str = "point"
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        return tuple(j for f in self.fingers for j in f.joints)
+
+    @property
+    def open(self) -> tuple[float, ...]:
+        return tuple(v for f in self.fingers for v in f.open)
+
+
+@dataclass(frozen=True)
+class SelfCollisionOptions:
+    """Automatic disabling of self-collision pairs (as MoveIt's setup assistant)."""
+
+    samples: int = 3000
+    seed: int = 0
+    never_margin: float = 0.02  # m
+
+
+@dataclass(frozen=True)
+class RobotSpec:
+    """The content of a robot.yaml file (names not yet checked against the URDF)."""
+
+    file: Path
+    urdf: Path
+    package_dirs: tuple[Path, ...]
+    groups: Mapping[str, tuple[str, ...]]
+    hands: Mapping[str, HandSpec]
+    rest: Mapping[str, float]
+    disabled_collisions: tuple[tuple[str, str], ...]
+    self_collision: SelfCollisionOptions = field(default_factory=SelfCollisionOptions)
+
+
+def _find_package_share(package: str) -> list[Path]:
+    """Directories holding ``<package>/`` from installed data wheels (cmeel layout)."""
+    import site
+    import sys
+
+    roots = [*site.getsitepackages(), site.getusersitepackages(), *sys.path]
+    found = []
+    for root in roots:
+        share = Path(root) / "cmeel.prefix" / "share"
+        if (share / package).is_dir() and share not in found:
+            found.append(share)
+    return found
+
+
+def resolve_urdf(file: Path, where: str, value: str) -> tuple[Path, tuple[Path, ...]]:
+    """The URDF path and the package directories its ``package://`` URIs need."""
+    if value.startswith("package://"):
+        package, _, rest = value[len("package://"):].partition("/")
+        for share in _find_package_share(package):
+            if (share / package / rest).is_file():
+                return (share / package / rest), (share,)
+        raise InputError(file, where, f"cannot find {value}: is the Python package that ships "
+                                      f"'{package}' installed (e.g. pip install {package})?")
+    path = resolve_path(file, where, value)
+    dirs = [path.parent, *(_find_package_share("example-robot-data"))]
+    return path, tuple(dirs)
+
+
+def load_robot_spec(path: str | Path) -> RobotSpec:
+    file, data = read_yaml(path)
+    f = Fields(file, data)
+    f.only("format", "urdf", "groups", "hands", "rest", "disabled_collisions", "self_collision")
+    if f.str("format") != ROBOT_FORMAT:
+        raise f.error("format", f"expected '{ROBOT_FORMAT}', found {f.data['format']!r}")
+    urdf, package_dirs = resolve_urdf(file, "urdf", f.str("urdf"))
+
+    g = f.sub("groups")
+    g.only("torso", "right_arm", "left_arm")
+    groups = {name: g.names(name) for name in ("torso", "right_arm", "left_arm")}
+    for name in ("right_arm", "left_arm"):
+        if not groups[name]:
+            raise g.error(name, "expected at least one joint")
+
+    h = f.sub("hands")
+    h.only(*HAND_SIDES)
+    hands = {side: _hand(h.sub(side), side) for side in HAND_SIDES if h.has(side)}
+    if not hands:
+        raise h.error(None, "expected at least one of: right, left")
+
+    rest: dict[str, float] = {}
+    if f.has("rest"):
+        r = f.sub("rest")
+        rest = {str(k): r.float(k) for k in r.data}
+
+    pairs = []
+    if f.has("disabled_collisions"):
+        raw = f.raw("disabled_collisions")
+        if not isinstance(raw, list):
+            raise f.error("disabled_collisions", "expected a list of [link_a, link_b] pairs")
+        for i, pair in enumerate(raw):
+            if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(s, str) for s in pair)):
+                raise f.error(f"disabled_collisions[{i}]", f"expected [link_a, link_b], found {pair!r}")
+            pairs.append((pair[0], pair[1]))
+
+    sc = SelfCollisionOptions()
+    if f.has("self_collision"):
+        s = f.sub("self_collision")
+        s.only("samples", "seed", "never_margin")
+        sc = SelfCollisionOptions(samples=s.int("samples", sc.samples, minimum=1), seed=s.int("seed", sc.seed),
+                                  never_margin=s.float("never_margin", sc.never_margin))
+
+    return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc)
+
+
+def _hand(h: Fields, side: str) -> HandSpec:
+    h.only("grasp_frame", "fingers", "contact")
+    raw = h.raw("fingers")
+    if not isinstance(raw, list) or not raw:
+        raise h.error("fingers", "expected a non-empty list of fingers")
+    fingers = []
+    for i, _ in enumerate(raw):
+        fi = Fields(h.file, raw[i], h.path(f"fingers[{i}]"))
+        fi.only("name", "joints", "tip_link", "tip_radius", "open")
+        joints = fi.names("joints")
+        if not joints:
+            raise fi.error("joints", "expected at least one joint")
+        opened = fi.vector("open", len(joints)) if fi.has("open") else (0.0,) * len(joints)
+        fingers.append(FingerSpec(fi.str("name", f"finger{i}"), joints, fi.str("tip_link"),
+                                  fi.float("tip_radius", positive=True), opened))
+    contact = h.str("contact", "point")
+    if contact not in ("point", "soft"):
+        raise h.error("contact", f"expected 'point' or 'soft', found {contact!r}")
+    return HandSpec(side, ARM_OF_HAND[side], h.str("grasp_frame"), tuple(fingers), contact)
+
+
+# --------------------------------------------------------------------------- scene.yaml
+
+SHAPES = ("box", "cylinder", "sphere", "mesh")
+
+
+@dataclass(frozen=True)
+class ObstacleSpec:
+    """A static obstacle in the robot base frame W.
+
+    ``size``: box (x, y, z) side lengths; cylinder (radius, length) along its z;
+    sphere (radius,); mesh (scale,).  ``mesh`` is the mesh file for ``shape == 'mesh'``.
+    """
+
+    name: str
+    shape: str
+    size: tuple[float, ...]
+    X_WO: np.ndarray  # (4, 4) pose of the obstacle frame O in W
+    mesh: Path | None = None
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    mesh: str  # 'builtin:NAME' or a path resolved against the scene file
+    scale: float = 1.0
+    friction: float = 0.5
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    X_WO_start: np.ndarray  # (4, 4) object start pose in W
+    X_WO_goal: np.ndarray  # (4, 4) object goal pose in W
+    robot_start: str | Mapping[str, float]  # 'rest' or joint -> value (others at rest)
+    robot_goal: str | Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class PlanningOptions:
+    """Options shared by the planning stages (metres, radians)."""
+
+    seed: int = 0
+    segment_resolution: float = 0.02  # rad: largest joint step when checking a segment
+    contact_tolerance: float = 0.002  # m: fingertip-object penetration allowed in a grasp
+    ik_restarts: int = 30
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    file: Path
+    robot: Path
+    object: ObjectSpec
+    obstacles: tuple[ObstacleSpec, ...]
+    task: TaskSpec
+    planning: PlanningOptions
+
+
+def load_scene_spec(path: str | Path) -> SceneSpec:
+    file, data = read_yaml(path)
+    f = Fields(file, data)
+    f.only("format", "robot", "object", "obstacles", "task", "planning")
+    if f.str("format") != SCENE_FORMAT:
+        raise f.error("format", f"expected '{SCENE_FORMAT}', found {f.data['format']!r}")
+    robot = resolve_path(file, "robot", f.str("robot"))
+
+    o = f.sub("object")
+    o.only("mesh", "scale", "friction")
+    mesh = o.str("mesh")
+    if not mesh.startswith("builtin:"):
+        mesh = str(resolve_path(file, "object.mesh", mesh))
+    obj = ObjectSpec(mesh, o.float("scale", 1.0, positive=True), o.float("friction", 0.5, positive=True))
+
+    raw = f.data.get("obstacles", []) or []
+    if not isinstance(raw, list):
+        raise f.error("obstacles", "expected a list of obstacles")
+    obstacles = tuple(_obstacle(Fields(file, item, f"obstacles[{i}]")) for i, item in enumerate(raw))
+    names = [ob.name for ob in obstacles]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise f.error("obstacles", f"duplicate obstacle name {dup[0]!r}")
+
+    t = f.sub("task")
+    t.only("object_start", "object_goal", "robot_start", "robot_goal")
+    task = TaskSpec(parse_pose(t, "object_start"), parse_pose(t, "object_goal"),
+                    _robot_conf(t, "robot_start"), _robot_conf(t, "robot_goal"))
+
+    planning = PlanningOptions()
+    if f.has("planning"):
+        p = f.sub("planning")
+        p.only("seed", "segment_resolution", "contact_tolerance", "ik_restarts")
+        planning = PlanningOptions(
+            seed=p.int("seed", planning.seed, minimum=0),
+            segment_resolution=p.float("segment_resolution", planning.segment_resolution, positive=True),
+            contact_tolerance=p.float("contact_tolerance", planning.contact_tolerance, positive=True),
+            ik_restarts=p.int("ik_restarts", planning.ik_restarts, minimum=1),
+        )
+    return SceneSpec(file, robot, obj, obstacles, task, planning)
+
+
+def _obstacle(f: Fields) -> ObstacleSpec:
+    f.only("name", "pose", *SHAPES)
+    name = f.str("name")
+    given = [s for s in SHAPES if f.has(s)]
+    if len(given) != 1:
+        raise f.error(None, f"obstacle {name!r}: expected exactly one of {', '.join(SHAPES)}")
+    shape = given[0]
+    X = parse_pose(f, "pose")
+    g = f.sub(shape)
+    mesh = None
+    if shape == "box":
+        g.only("size")
+        size = g.vector("size", 3, positive=True)
+    elif shape == "cylinder":
+        g.only("radius", "length")
+        size = (g.float("radius", positive=True), g.float("length", positive=True))
+    elif shape == "sphere":
+        g.only("radius")
+        size = (g.float("radius", positive=True),)
+    else:
+        g.only("file", "scale")
+        mesh = resolve_path(f.file, g.path("file"), g.str("file"))
+        size = (g.float("scale", 1.0, positive=True),)
+    return ObstacleSpec(name, shape, size, X, mesh)
+
+
+def _robot_conf(t: Fields, key: str) -> str | Mapping[str, float]:
+    v = t.data.get(key, "rest")
+    if v == "rest":
+        return "rest"
+    if isinstance(v, dict):
+        c = t.sub(key)
+        return {str(k): c.float(k) for k in c.data}
+    raise t.error(key, f"expected 'rest' or a mapping joint -> value (rad or m), found {v!r}")

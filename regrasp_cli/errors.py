@@ -1,0 +1,39 @@
+"""Exceptions of the project.
+
+Every failure a user can cause is a :class:`RegraspError`; the CLI turns it into one
+line on stderr and exit code 2 (``InputError``) or 1 (a planning failure).  Messages
+name the file, the field and what was expected, so they say how to fix the problem.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class RegraspError(Exception):
+    """Base class of the errors the CLI reports as one line."""
+
+    exit_code = 1
+
+
+class InputError(RegraspError):
+    """Malformed or inconsistent user input: a file, a field, a value (exit code 2).
+
+    Args:
+        file: the file at fault (``None`` when the input came from the command line).
+        field: dotted path of the field inside the file, e.g. ``task.object_start.quat``.
+        message: what is wrong and what was expected.
+    """
+
+    exit_code = 2
+
+    def __init__(self, file: str | Path | None, field: str | None, message: str):
+        self.file = None if file is None else str(file)
+        self.field = field
+        self.message = message
+        where = ": ".join(p for p in (self.file, self.field) if p)
+        super().__init__(f"{where}: {message}" if where else message)
+
+
+class StaleArtefactError(InputError):
+    """A cached artefact whose recorded input hashes do not match the current inputs."""

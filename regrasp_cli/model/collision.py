@@ -1,0 +1,197 @@
+"""Collision world: robot self-collision, static obstacles and the manipulated object.
+
+One :class:`CollisionWorld` is an immutable description of which geometry pairs are
+checked and with which tolerance; it owns the pinocchio/coal scratch data needed to check
+configurations (like pinocchio's Model/Data split, the scratch is private and holds no
+query state).  Checks go through pinocchio + coal's broadphase manager (a dynamic AABB
+tree) with early exit at the first collision: on the default robot this is the fastest of
+the back-ends we measured (``scripts/bench_collision.py``, docs/BENCHMARKS.md).
+
+Pairs checked:
+
+* robot-robot: every pair of robot geometries except the disabled link pairs
+  (:mod:`regrasp_cli.model.selfcollision`: adjacent, never or always colliding, and those
+  listed in robot.yaml);
+* robot-obstacle: every moving robot geometry against every obstacle (geometries fixed to
+  the robot's root never move, so touching a support is the user's design, not a collision);
+* object-robot: every robot geometry; the fingertips of the hands in ``touching`` may
+  penetrate the object by up to ``contact_tolerance`` (a precision grasp touches it);
+* object-obstacle: only when the object moves with a hand; it may rest on a support with
+  up to ``support_tolerance`` of penetration (the pick and place configurations).
+
+Tolerances are coal security margins (a negative margin allows that much penetration).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+import coal
+import numpy as np
+import pinocchio as pin
+import trimesh
+
+from regrasp_cli.config import ObstacleSpec
+from regrasp_cli.model.robot import Robot
+
+
+@dataclass(frozen=True)
+class CollisionOptions:
+    contact_tolerance: float = 0.002  # m, fingertip-object penetration allowed when touching
+    support_tolerance: float = 0.002  # m, object-obstacle penetration allowed (resting)
+
+
+@dataclass(frozen=True)
+class ObjectPlacement:
+    """Where the manipulated object is.
+
+    ``X_PO`` is the object pose in its parent: the world W when ``attached_to`` is None,
+    otherwise the grasp frame G of that hand.  ``touching`` lists the hands whose
+    fingertips are in contact with it (the holding hand is always included).
+    """
+
+    mesh: trimesh.Trimesh
+    X_PO: np.ndarray
+    attached_to: str | None = None
+    touching: tuple[str, ...] = ()
+
+
+def mesh_geometry(mesh: trimesh.Trimesh) -> coal.BVHModelOBBRSS:
+    """A coal BVH of a triangle mesh (works for non-convex, non-watertight meshes)."""
+    bvh = coal.BVHModelOBBRSS()
+    bvh.beginModel(len(mesh.faces), len(mesh.vertices))
+    bvh.addVertices(np.asarray(mesh.vertices, dtype=float))
+    bvh.addTriangles(np.asarray(mesh.faces, dtype=np.int64))
+    bvh.endModel()
+    return bvh
+
+
+def obstacle_geometry(ob: ObstacleSpec) -> coal.CollisionGeometry:
+    if ob.shape == "box":
+        return coal.Box(*ob.size)
+    if ob.shape == "cylinder":
+        return coal.Cylinder(*ob.size)
+    if ob.shape == "sphere":
+        return coal.Sphere(ob.size[0])
+    from regrasp_cli.model.objects import load_object_mesh
+
+    mesh = load_object_mesh(str(ob.mesh), base_dir=ob.mesh.parent, scale=ob.size[0], field=f"obstacles.{ob.name}")
+    return mesh_geometry(mesh.mesh)
+
+
+class CollisionWorld:
+    """Checks full-robot configurations against the robot itself, obstacles and the object."""
+
+    def __init__(self, robot: Robot, obstacles: Sequence[ObstacleSpec] = (),
+                 disabled_links: Iterable[tuple[str, str]] = (), obj: ObjectPlacement | None = None,
+                 options: CollisionOptions = CollisionOptions()):
+        self.robot, self.obstacles, self.object, self.options = robot, tuple(obstacles), obj, options
+        gm = robot.collision_model.copy()
+        n_robot = gm.ngeoms
+        self.robot_geoms = np.arange(n_robot)
+        self.obstacle_geoms = []
+        for ob in self.obstacles:
+            X = ob.X_WO
+            go = pin.GeometryObject(f"obstacle:{ob.name}", 0, 0, pin.SE3(X[:3, :3].copy(), X[:3, 3].copy()),
+                                    obstacle_geometry(ob))
+            self.obstacle_geoms.append(gm.addGeometryObject(go))
+        self.object_geom = None
+        if obj is not None:
+            if obj.attached_to is None:
+                joint, frame, X_JO = 0, 0, obj.X_PO
+            else:
+                fid = robot.hands[obj.attached_to].grasp_frame
+                f = robot.model.frames[fid]
+                joint, frame = f.parentJoint, fid
+                X_JO = f.placement.homogeneous @ obj.X_PO
+            go = pin.GeometryObject("object", joint, frame, pin.SE3(X_JO[:3, :3].copy(), X_JO[:3, 3].copy()),
+                                    mesh_geometry(obj.mesh))
+            self.object_geom = gm.addGeometryObject(go)
+
+        disabled = {frozenset(p) for p in disabled_links}
+        link = [robot.link_of_geometry(g) for g in range(n_robot)]
+        root_fixed = [gm.geometryObjects[g].parentJoint == 0 for g in range(n_robot)]
+        margins: list[float] = []
+        for a in range(n_robot):
+            for b in range(a + 1, n_robot):
+                if frozenset((link[a], link[b])) not in disabled and link[a] != link[b]:
+                    gm.addCollisionPair(pin.CollisionPair(a, b))
+                    margins.append(0.0)
+        for a in range(n_robot):
+            if root_fixed[a]:
+                continue
+            for o in self.obstacle_geoms:
+                gm.addCollisionPair(pin.CollisionPair(a, o))
+                margins.append(0.0)
+        if obj is not None:
+            touching = set(obj.touching) | ({obj.attached_to} if obj.attached_to else set())
+            tips = {robot.model.frames[f].name for h in touching for f in robot.hands[h].tip_frames}
+            for a in range(n_robot):
+                gm.addCollisionPair(pin.CollisionPair(a, self.object_geom))
+                margins.append(-options.contact_tolerance if link[a] in tips else 0.0)
+            if obj.attached_to is not None:
+                for o in self.obstacle_geoms:
+                    gm.addCollisionPair(pin.CollisionPair(self.object_geom, o))
+                    margins.append(-options.support_tolerance)
+        self.geometry_model = gm
+        self.geometry_data = gm.createData()
+        for k, m in enumerate(margins):
+            self.geometry_data.collisionRequests[k].security_margin = m
+        self.data = robot.model.createData()
+        self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
+            robot.model, self.geometry_model, self.geometry_data)
+        self.n_checks = 0
+
+    @property
+    def n_pairs(self) -> int:
+        return len(self.geometry_model.collisionPairs)
+
+    def geometry_name(self, gid: int) -> str:
+        go = self.geometry_model.geometryObjects[gid]
+        if gid < len(self.robot_geoms):
+            return self.robot.model.frames[go.parentFrame].name
+        return go.name
+
+    # ------------------------------------------------------------------ checks
+
+    def is_free(self, q: np.ndarray) -> bool:
+        """True when the configuration (nq,) is collision-free (early exit)."""
+        self.n_checks += 1
+        return not pin.computeCollisions(self.robot.model, self.data, self.manager, self.robot.to_pin(q), True)
+
+    def colliding_pairs(self, q: np.ndarray) -> list[tuple[str, str]]:
+        """All colliding pairs (link or obstacle names) at q: for reports, not the hot path."""
+        pin.computeCollisions(self.robot.model, self.data, self.geometry_model, self.geometry_data,
+                              self.robot.to_pin(q), False)
+        out = []
+        for k, cp in enumerate(self.geometry_model.collisionPairs):
+            if self.geometry_data.collisionResults[k].isCollision():
+                out.append((self.geometry_name(cp.first), self.geometry_name(cp.second)))
+        return out
+
+    def segment_free(self, q0: np.ndarray, q1: np.ndarray, resolution: float) -> bool:
+        """Straight segment q0 -> q1 in joint space, checked so that no joint moves more than
+        ``resolution`` (rad or m) between two checked configurations.  The end points are
+        checked too.  Samples are visited in bisection order (coarse to fine), so a
+        colliding segment is usually rejected after few checks."""
+        for t in segment_samples(q0, q1, resolution):
+            if not self.is_free(q0 + t * (q1 - q0)):
+                return False
+        return True
+
+
+def segment_samples(q0: np.ndarray, q1: np.ndarray, resolution: float) -> np.ndarray:
+    """Interpolation parameters in [0, 1] (ends included) spaced so that no joint moves more
+    than ``resolution`` between neighbours, ordered coarse to fine (ends, then midpoints
+    breadth-first)."""
+    n = max(1, int(np.ceil(np.max(np.abs(q1 - q0)) / resolution)))
+    order, queue = [0, n], deque([(0, n)])
+    while queue:
+        a, b = queue.popleft()
+        if b - a >= 2:
+            m = (a + b) // 2
+            order.append(m)
+            queue.extend(((a, m), (m, b)))
+    return np.asarray(order, dtype=float) / n

@@ -1,0 +1,222 @@
+"""The robot: a pinocchio model of any URDF, with the groups and hands of its robot.yaml.
+
+Configurations ``q`` are 1-D float arrays with one value per actuated joint, in the order
+of :attr:`Robot.joint_names` (revolute and continuous joints in rad, prismatic in m).
+For URDFs whose joints all have one coordinate this is pinocchio's own order and
+:meth:`Robot.to_pin` is free; continuous joints (two coordinates, cos/sin, in pinocchio)
+are converted.  The groups follow Saut et al. 2010, §V-A (Fig. 4): the torso is the
+*common* part, each arm (+ its hand) an *independent* part.
+
+A :class:`Robot` is immutable once built; it keeps one pinocchio ``Data`` as scratch for
+its convenience functions (FK), so a Robot is not to be shared between threads
+(processes, as joblib uses, are fine).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import pinocchio as pin
+
+from regrasp_cli.config import HandSpec, RobotSpec, load_robot_spec
+from regrasp_cli.errors import InputError
+from regrasp_cli.store import sha256_file
+
+GROUP_NAMES = ("torso", "right_arm", "left_arm")
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """urdfdom prints parse errors to the C-level stderr; we report them ourselves."""
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):
+        yield
+        return
+    saved = os.dup(fd)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), fd)
+            yield
+    finally:
+        os.dup2(saved, fd)
+        os.close(saved)
+
+
+@dataclass(frozen=True)
+class Hand:
+    """A hand resolved against the model: indices into ``q`` and frame ids."""
+
+    spec: HandSpec
+    arm_idx: np.ndarray  # (7,) indices of the arm joints in q
+    finger_idx: tuple[np.ndarray, ...]  # per finger, indices of its joints in q
+    tip_frames: tuple[int, ...]  # per finger, pinocchio frame id of the tip link
+    grasp_frame: int  # pinocchio frame id of the grasp frame G
+    open: np.ndarray  # (n_hand_joints,) open configuration, in the order of ``idx``
+
+    @property
+    def side(self) -> str:
+        return self.spec.side
+
+    @property
+    def idx(self) -> np.ndarray:
+        """Indices in q of all the hand's finger joints."""
+        return np.concatenate(self.finger_idx)
+
+
+class Robot:
+    """A URDF robot with groups and hands.  Build with :func:`load_robot`."""
+
+    def __init__(self, spec: RobotSpec):
+        self.spec = spec
+        try:
+            with _quiet_stderr():
+                model, collision, visual = pin.buildModelsFromUrdf(
+                    str(spec.urdf), package_dirs=[str(d) for d in spec.package_dirs])
+        except (RuntimeError, ValueError) as exc:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            raise InputError(spec.file, "urdf", f"cannot parse URDF {spec.urdf}: {first}") from None
+        self.model: pin.Model = model
+        self.collision_model: pin.GeometryModel = collision
+        self.visual_model: pin.GeometryModel = visual
+        self._data = model.createData()
+
+        names, idx_q, nqs = [], [], []
+        for j in range(1, model.njoints):
+            jm = model.joints[j]
+            if jm.nv != 1:
+                raise InputError(spec.urdf, f"joint {model.names[j]}",
+                                 f"unsupported joint type {jm.shortname()} (expected revolute, "
+                                 "continuous or prismatic)")
+            names.append(model.names[j])
+            idx_q.append(jm.idx_q)
+            nqs.append(jm.nq)
+        self.joint_names: tuple[str, ...] = tuple(names)
+        self._idx_q = np.array(idx_q, dtype=int)
+        self._continuous = np.array([n == 2 for n in nqs], dtype=bool)
+        self._identity = not self._continuous.any()
+        n = len(names)
+        lo, hi = np.empty(n), np.empty(n)
+        for i, j in enumerate(range(1, model.njoints)):
+            if self._continuous[i]:
+                lo[i], hi[i] = -np.pi, np.pi
+            else:
+                lo[i] = model.lowerPositionLimit[idx_q[i]]
+                hi[i] = model.upperPositionLimit[idx_q[i]]
+        self.lower, self.upper = lo, hi
+        self.velocity = np.array([model.velocityLimit[model.joints[j].idx_v] for j in range(1, model.njoints)])
+        self.velocity[self.velocity <= 0] = 1.0  # URDFs without limits: a cautious default
+
+        self.groups: dict[str, np.ndarray] = {
+            g: self._indices(spec.groups[g], f"groups.{g}") for g in GROUP_NAMES}
+        self.hands: dict[str, Hand] = {s: self._hand(h) for s, h in spec.hands.items()}
+        self.q_rest = self.configuration(spec.rest, "rest", base=np.clip(np.zeros(n), lo, hi))
+
+    # ------------------------------------------------------------------ names and indices
+
+    @property
+    def nq(self) -> int:
+        return len(self.joint_names)
+
+    def joint_index(self, name: str, field: str = "joint") -> int:
+        try:
+            return self.joint_names.index(name)
+        except ValueError:
+            raise InputError(self.spec.file, field, f"unknown joint {name!r} (not an actuated joint of "
+                                                    f"{self.spec.urdf.name})") from None
+
+    def _indices(self, names, field: str) -> np.ndarray:
+        return np.array([self.joint_index(n, field) for n in names], dtype=int)
+
+    def frame_id(self, name: str, field: str = "link") -> int:
+        if not self.model.existFrame(name):
+            raise InputError(self.spec.file, field, f"unknown link or frame {name!r} in {self.spec.urdf.name}")
+        return self.model.getFrameId(name)
+
+    def _hand(self, h: HandSpec) -> Hand:
+        where = f"hands.{h.side}"
+        finger_idx = tuple(self._indices(f.joints, f"{where}.fingers[{i}].joints") for i, f in enumerate(h.fingers))
+        tips = tuple(self.frame_id(f.tip_link, f"{where}.fingers[{i}].tip_link") for i, f in enumerate(h.fingers))
+        open_ = np.array(h.open, dtype=float)
+        idx = np.concatenate(finger_idx)
+        bad = (open_ < self.lower[idx] - 1e-9) | (open_ > self.upper[idx] + 1e-9)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise InputError(self.spec.file, f"{where}.fingers",
+                             f"open value {open_[k]} of joint {self.joint_names[idx[k]]} is outside its "
+                             f"limits [{self.lower[idx[k]]:.3f}, {self.upper[idx[k]]:.3f}]")
+        return Hand(h, self.groups[h.arm], finger_idx, tips, self.frame_id(h.grasp_frame, f"{where}.grasp_frame"), open_)
+
+    def configuration(self, values: Mapping[str, float], field: str, base: np.ndarray | None = None) -> np.ndarray:
+        """A full configuration from ``joint -> value`` (others from ``base``, default rest),
+        with hands at their open configuration unless given; values are checked against limits."""
+        q = (self.q_rest if base is None else base).copy()
+        if base is not None:
+            for hand in getattr(self, "hands", {}).values():
+                q[hand.idx] = hand.open
+        for name, v in values.items():
+            i = self.joint_index(name, f"{field}.{name}")
+            if not self.lower[i] - 1e-9 <= v <= self.upper[i] + 1e-9:
+                raise InputError(self.spec.file if field == "rest" else None, f"{field}.{name}",
+                                 f"value {v} outside the joint limits [{self.lower[i]:.4f}, {self.upper[i]:.4f}]")
+            q[i] = v
+        return q
+
+    # ------------------------------------------------------------------ kinematics
+
+    def to_pin(self, q: np.ndarray) -> np.ndarray:
+        """Our configuration -> pinocchio's (cos/sin for continuous joints)."""
+        if self._identity:
+            return q
+        qp = np.empty(self.model.nq)
+        c = self._continuous
+        qp[self._idx_q[~c]] = q[~c]
+        qp[self._idx_q[c]] = np.cos(q[c])
+        qp[self._idx_q[c] + 1] = np.sin(q[c])
+        return qp
+
+    def fk(self, q: np.ndarray, frame: str | int) -> np.ndarray:
+        """X_WF: pose (4, 4) of a frame (link or joint name, or frame id) in the base frame W."""
+        fid = frame if isinstance(frame, (int, np.integer)) else self.frame_id(frame)
+        pin.forwardKinematics(self.model, self._data, self.to_pin(q))
+        return pin.updateFramePlacement(self.model, self._data, int(fid)).homogeneous.copy()
+
+    def fk_many(self, q: np.ndarray, frames) -> list[np.ndarray]:
+        """Poses of several frames for one configuration (one FK pass)."""
+        pin.framesForwardKinematics(self.model, self._data, self.to_pin(q))
+        return [self._data.oMf[int(f)].homogeneous.copy() for f in frames]
+
+    def within_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:
+        return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
+
+    def sample(self, rng: np.random.Generator, idx: np.ndarray | None = None, base: np.ndarray | None = None) -> np.ndarray:
+        """Uniform random configuration within limits for the joints ``idx`` (all by default);
+        the other joints keep the values of ``base`` (rest by default)."""
+        q = (self.q_rest if base is None else base).copy()
+        idx = np.arange(self.nq) if idx is None else idx
+        q[idx] = rng.uniform(self.lower[idx], self.upper[idx])
+        return q
+
+    @cached_property
+    def urdf_sha256(self) -> str:
+        return sha256_file(self.spec.urdf)
+
+    @cached_property
+    def robot_yaml_sha256(self) -> str:
+        return sha256_file(self.spec.file)
+
+    def link_of_geometry(self, gid: int) -> str:
+        """Name of the URDF link a collision geometry belongs to."""
+        return self.model.frames[self.collision_model.geometryObjects[gid].parentFrame].name
+
+
+def load_robot(path: str | Path) -> Robot:
+    """Load robot.yaml and its URDF into a :class:`Robot`."""
+    return Robot(load_robot_spec(path))

@@ -1,0 +1,116 @@
+"""Human-readable summaries printed by the CLI (rich tables)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console
+from rich.table import Table
+
+from regrasp_cli.model.reach import Reach, reach
+from regrasp_cli.scene import Problem, load_problem
+
+
+def _fmt(v, n=3) -> str:
+    return "[" + ", ".join(f"{x:.{n}g}" for x in v) + "]"
+
+
+def reachability(problem: Problem, rng: np.random.Generator) -> dict[tuple[str, str], Reach]:
+    """Reach of each hand at the object's start and goal poses (bounding-box centre)."""
+    world = problem.world()
+    centre_O = problem.object.mesh.bounds.mean(axis=0)
+    out = {}
+    for pose_name, X in (("start", problem.spec.task.X_WO_start), ("goal", problem.spec.task.X_WO_goal)):
+        p_W = X[:3, :3] @ centre_O + X[:3, 3]
+        for hand in problem.robot.hands:
+            out[(pose_name, hand)] = reach(problem.robot, world, hand, p_W, rng)
+    return out
+
+
+def print_info(scene: Path, cache_dir: Path, seed: int | None, console: Console | None = None) -> None:
+    console = console or Console()
+    problem = load_problem(scene, cache_dir)
+    robot, spec = problem.robot, problem.spec
+    rng = np.random.default_rng(spec.planning.seed if seed is None else seed)
+
+    t = Table(title=f"Robot {robot.model.name} ({robot.spec.urdf.name})", show_header=True)
+    t.add_column("group")
+    t.add_column("DoF", justify="right")
+    t.add_column("joints")
+    for g, idx in robot.groups.items():
+        t.add_row(g, str(len(idx)), ", ".join(robot.joint_names[i] for i in idx) or "-")
+    for side, h in robot.hands.items():
+        t.add_row(f"{side} hand", str(len(h.idx)),
+                  f"{len(h.spec.fingers)} fingers ({', '.join(f.name for f in h.spec.fingers)}), "
+                  f"grasp frame {h.spec.grasp_frame}, {h.spec.contact} contact")
+    grouped = set(np.concatenate([*robot.groups.values(), *(h.idx for h in robot.hands.values())]).tolist())
+    other = [robot.joint_names[i] for i in range(robot.nq) if i not in grouped]
+    if other:
+        t.add_row("other (held at rest)", str(len(other)), ", ".join(other))
+    t.add_row("total", str(robot.nq), "")
+    console.print(t)
+
+    world = problem.world()
+    n_geoms = robot.collision_model.ngeoms
+    d = problem.disabled
+    t = Table(title="Collision checking (pinocchio + coal broadphase)")
+    t.add_column("what")
+    t.add_column("count", justify="right")
+    t.add_row("robot collision geometries", str(n_geoms))
+    t.add_row("link pairs disabled: adjacent / always / never / robot.yaml",
+              f"{d.count('adjacent')} / {d.count('always')} / {d.count('never')} / {d.count('user')}")
+    t.add_row(f"  ('never' = farther than {d.never_margin} m in {d.samples} random configurations, same chain)", "")
+    n_obst = len(world.obstacle_geoms)
+    n_self = world.n_pairs - sum(1 for cp in world.geometry_model.collisionPairs if cp.second >= n_geoms)
+    t.add_row("robot-robot geometry pairs checked", str(n_self))
+    t.add_row("robot-obstacle geometry pairs checked", str(world.n_pairs - n_self))
+    t.add_row("total pairs checked", str(world.n_pairs))
+    console.print(t)
+
+    t = Table(title=f"Obstacles ({n_obst})")
+    for c in ("name", "shape", "size (m)", "position (m)"):
+        t.add_column(c)
+    for ob in spec.obstacles:
+        t.add_row(ob.name, ob.shape, _fmt(ob.size), _fmt(ob.X_WO[:3, 3]))
+    console.print(t)
+
+    obj = problem.object
+    t = Table(title="Object")
+    t.add_column("what")
+    t.add_column("value")
+    t.add_row("mesh", obj.name)
+    t.add_row("triangles", str(obj.n_triangles))
+    t.add_row("watertight", f"{'yes' if obj.watertight else 'no'} ({obj.n_shells} shell{'s' * (obj.n_shells != 1)})")
+    t.add_row("extents (m)", _fmt(obj.extents))
+    t.add_row("friction", f"{spec.object.friction:g}")
+    console.print(t)
+
+    reaches = reachability(problem, rng)
+    t = Table(title="Reachability of the object poses (grasp frame at the object centre)")
+    for c in ("pose", "hand", "reachable", "approach orientations: IK / collision-free / tried"):
+        t.add_column(c)
+    for (pose, hand), r in reaches.items():
+        t.add_row(pose, hand, "[green]yes[/]" if r.reachable else "[red]no[/]",
+                  f"{r.ik_solutions} / {r.collision_free} / {r.orientations_tried}")
+    console.print(t)
+
+    t = Table(title="Robot configurations")
+    t.add_column("configuration")
+    t.add_column("collision-free")
+    for name, q, X in (("start (object at its start pose)", problem.q_start, spec.task.X_WO_start),
+                       ("goal (object at its goal pose)", problem.q_goal, spec.task.X_WO_goal)):
+        w = problem.world(problem.object_at(X))
+        pairs = w.colliding_pairs(q)
+        t.add_row(name, "[green]yes[/]" if not pairs else f"[red]no[/]: {', '.join('-'.join(p) for p in pairs[:3])}")
+    console.print(t)
+
+    for pose in ("start", "goal"):
+        hands = [h for h in robot.hands if reaches[(pose, h)].reachable]
+        if len(hands) == 1:
+            verdict = f"reachable by the {hands[0]} arm only"
+        elif hands:
+            verdict = "reachable by both arms"
+        else:
+            verdict = "reachable by neither arm"
+        console.print(f"The object's {pose} pose is {verdict}.")

@@ -1,0 +1,59 @@
+"""A loaded planning problem: scene.yaml resolved into robot, object, obstacles and task.
+
+The :class:`Problem` is immutable: planning stages build the collision worlds they need
+from it (object static at a pose, or held by a hand) with :meth:`Problem.world`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from regrasp_cli.config import SceneSpec, load_scene_spec
+from regrasp_cli.errors import InputError
+from regrasp_cli.model.collision import CollisionOptions, CollisionWorld, ObjectPlacement
+from regrasp_cli.model.objects import ObjectMesh, load_object_mesh
+from regrasp_cli.model.robot import Robot, load_robot
+from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
+
+
+@dataclass(frozen=True)
+class Problem:
+    spec: SceneSpec
+    robot: Robot
+    object: ObjectMesh
+    disabled: DisabledPairs
+    q_start: np.ndarray  # (nq,) robot start configuration
+    q_goal: np.ndarray  # (nq,) robot goal configuration
+
+    @property
+    def collision_options(self) -> CollisionOptions:
+        tol = self.spec.planning.contact_tolerance
+        return CollisionOptions(contact_tolerance=tol, support_tolerance=tol)
+
+    def world(self, obj: ObjectPlacement | None = None) -> CollisionWorld:
+        """Self-collision + static obstacles (+ the object placed as given)."""
+        return CollisionWorld(self.robot, self.spec.obstacles, self.disabled.links(), obj, self.collision_options)
+
+    def object_at(self, X_WO: np.ndarray) -> ObjectPlacement:
+        """The object resting at X_WO (4, 4), as a static obstacle."""
+        return ObjectPlacement(self.object.mesh, X_WO)
+
+
+def load_problem(path: str | Path, cache_dir: Path | None) -> Problem:
+    spec = load_scene_spec(path)
+    robot = load_robot(spec.robot)
+    obj = load_object_mesh(spec.object.mesh, base_dir=spec.file.parent, scale=spec.object.scale,
+                           file=str(spec.file), field="object.mesh")
+    q = {}
+    for key, value in (("robot_start", spec.task.robot_start), ("robot_goal", spec.task.robot_goal)):
+        if value == "rest":
+            q[key] = robot.q_rest.copy()
+        else:
+            try:
+                q[key] = robot.configuration(value, f"task.{key}")
+            except InputError as exc:
+                raise InputError(spec.file, exc.field, exc.message) from None
+    return Problem(spec, robot, obj, disabled_pairs(robot, cache_dir), q["robot_start"], q["robot_goal"])

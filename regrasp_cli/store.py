@@ -1,0 +1,466 @@
+"""Content hashes, atomic writes and provenance-stamped HDF5 artefacts.
+
+Offline artefacts (grasp lists, roadmaps, ...) are cached in HDF5 files that record
+which inputs they were built from, so a stale cache is refused instead of silently
+used.  Every file is written atomically (temp file in the same directory, fsync,
+``os.replace``): a crash or an exception never leaves a half-written artefact.
+
+On-disk layout of an artefact (one HDF5 file)::
+
+    /                                   root group
+      @format            str            kind of artefact, e.g. "regrasp.grasps"
+      @format_version    int            layout version of that kind
+      @software_version  str            regrasp_cli.__version__ of the writer
+      @created           str            ISO-8601 UTC, e.g. "2024-05-01T12:00:00Z"
+      @input_sha256.<name>  str         sha256 hex of each input ("urdf", "mesh", ...)
+      @<attr>            str|int|float  caller attributes (any other name)
+      <dataset>                         datasets, nested paths like "grasps/hand_in_object"
+      <group>/<dataset>                 datasets of the ``groups`` argument
+
+Provenance lives in prefixed *root* attributes (not a subgroup), so the attribute
+name ``input_sha256.<name>`` is also the field named in a :class:`StaleArtefactError`.
+Datasets are written in sorted order without timestamps: the same inputs give the
+same datasets; only ``@created`` differs between two builds.
+
+Freshness rules of :func:`read_artefact`: a missing file, an unreadable file or a
+different ``format`` is an :class:`InputError`; an *older* ``format_version`` or any
+input-hash difference is a :class:`StaleArtefactError` (rebuilding fixes it, and
+:func:`is_fresh` answers ``False``); a *newer* ``format_version`` is an
+:class:`InputError` (the file comes from a newer regrasp).
+
+:func:`sha256_params` hashes canonical JSON (sorted keys, no spaces, floats via
+``repr``).  ``int`` and ``float`` are distinct (``1`` and ``1.0`` hash differently);
+tuples hash like lists; numpy scalars/arrays hash like the Python values of
+``.item()``/``.tolist()``; dataclasses hash like ``dataclasses.asdict``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Protocol
+
+import h5py
+import numpy as np
+
+from regrasp_cli import __version__
+from regrasp_cli.errors import InputError, StaleArtefactError
+
+__all__ = [
+    "Artefact",
+    "ExpectedProvenance",
+    "Provenance",
+    "atomic_write",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "canonical_json",
+    "is_fresh",
+    "read_artefact",
+    "read_provenance",
+    "sha256_bytes",
+    "sha256_file",
+    "sha256_params",
+    "write_artefact",
+]
+
+INPUT_PREFIX = "input_sha256."
+_PROVENANCE_ATTRS = ("format", "format_version", "software_version", "created")
+_CHUNK = 1 << 20
+
+AttrValue = str | int | float
+
+
+# --------------------------------------------------------------------------- hashes
+
+
+def sha256_bytes(b: bytes) -> str:
+    """Hex sha256 of ``b``."""
+    return hashlib.sha256(b).hexdigest()
+
+
+def sha256_file(path: str | Path) -> str:
+    """Hex sha256 of a file's content (streamed; ``OSError`` if unreadable)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(_CHUNK):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _canonical(obj: Any) -> Any:
+    """``obj`` as JSON-native values; ``TypeError`` for anything without a canonical form."""
+    if isinstance(obj, np.ndarray):
+        obj = obj.tolist()
+    elif isinstance(obj, np.generic):
+        obj = obj.item()
+    elif dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        obj = dataclasses.asdict(obj)
+    if obj is None or isinstance(obj, (str, bool, int, float)):
+        return obj
+    if isinstance(obj, Mapping):
+        out: dict[str, Any] = {}
+        for k, v in obj.items():
+            if not isinstance(k, str):
+                raise TypeError(f"sha256_params: dict key {k!r} is not a str")
+            out[k] = _canonical(v)
+        return out
+    if isinstance(obj, (list, tuple)):
+        return [_canonical(v) for v in obj]
+    raise TypeError(f"sha256_params: cannot hash a {type(obj).__name__}")
+
+
+def canonical_json(obj: Any) -> str:
+    """The canonical JSON text hashed by :func:`sha256_params`."""
+    return json.dumps(_canonical(obj), sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+
+
+def sha256_params(obj: Any) -> str:
+    """Hex sha256 of the canonical JSON of ``obj`` (key order does not matter)."""
+    return sha256_bytes(canonical_json(obj).encode("utf-8"))
+
+
+# ---------------------------------------------------------------------- atomic writes
+
+
+def atomic_write(path: str | Path, writer: Callable[[Path], None]) -> None:
+    """Create ``path`` atomically: ``writer(tmp)`` fills ``.<name>.<pid>.tmp`` beside it,
+    which is fsynced and moved into place with ``os.replace``.
+
+    The parent directory is created.  If anything fails the temp file is removed, the
+    previous ``path`` (if any) is left untouched, and the exception is re-raised.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.unlink(missing_ok=True)
+        writer(tmp)
+        fd = os.open(tmp, os.O_RDONLY | getattr(os, "O_BINARY", 0))
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    _fsync_dir(path.parent)
+
+
+def _fsync_dir(directory: Path) -> None:
+    """Persist a rename (best effort; POSIX only)."""
+    if os.name != "posix":
+        return
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Atomically replace ``path`` by ``data``."""
+
+    def writer(tmp: Path) -> None:
+        tmp.write_bytes(data)
+
+    atomic_write(path, writer)
+
+
+def atomic_write_text(path: str | Path, text: str, encoding: str = "utf-8") -> None:
+    """Atomically replace ``path`` by ``text``."""
+    atomic_write_bytes(path, text.encode(encoding))
+
+
+# ------------------------------------------------------------------------ provenance
+
+
+class ExpectedProvenance(Protocol):
+    """What a reader expects: the kind, its layout version and the current input hashes."""
+
+    @property
+    def format(self) -> str: ...
+
+    @property
+    def format_version(self) -> int: ...
+
+    @property
+    def inputs(self) -> Mapping[str, str]: ...
+
+
+@dataclasses.dataclass(frozen=True)
+class Provenance:
+    """Where an artefact comes from.
+
+    ``inputs`` maps an input name (``"urdf"``, ``"robot_yaml"``, ``"mesh"``,
+    ``"params"``, ...) to its sha256 hex.  ``software_version`` and ``created`` are
+    left empty by callers and filled by :func:`write_artefact`.
+    """
+
+    format: str
+    format_version: int
+    inputs: Mapping[str, str] = dataclasses.field(default_factory=dict, hash=False)
+    software_version: str = ""
+    created: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.format, str) or not self.format:
+            raise ValueError(f"Provenance.format must be a non-empty str, got {self.format!r}")
+        if isinstance(self.format_version, bool) or not isinstance(self.format_version, int):
+            raise ValueError(f"Provenance.format_version must be an int, got {self.format_version!r}")
+        for name, digest in self.inputs.items():
+            if not isinstance(name, str) or not name or not isinstance(digest, str):
+                raise ValueError(f"Provenance.inputs: bad entry {name!r}: {digest!r}")
+        object.__setattr__(self, "inputs", dict(sorted(self.inputs.items())))
+
+
+def _utc_now() -> str:
+    return datetime.now(timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
+
+
+def _rebuild_hint(fmt: str) -> str:
+    """``"regrasp.grasps"`` -> ``"regrasp grasps build"``."""
+    kind = fmt.removeprefix("regrasp.").replace(".", " ")
+    return f"regrasp {kind} build"
+
+
+# ------------------------------------------------------------------------- artefacts
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Artefact:
+    """A loaded artefact: its provenance, caller attributes and every dataset.
+
+    ``data`` keys are full paths without the leading slash, e.g.
+    ``"grasps/hand_in_object"``; ``artefact[name]`` is ``data[name]`` but raises an
+    :class:`InputError` naming the file and dataset when it is absent.
+    """
+
+    path: Path
+    provenance: Provenance
+    attrs: dict[str, AttrValue]
+    data: dict[str, np.ndarray]
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.data[name]
+        except KeyError:
+            have = ", ".join(sorted(self.data)) or "none"
+            raise InputError(self.path, name, f"artefact has no dataset '{name}' (has: {have})") from None
+
+
+def _check_name(name: str, what: str) -> None:
+    if not isinstance(name, str) or not name or name.startswith("/") or name.endswith("/") or "//" in name:
+        raise ValueError(f"write_artefact: bad {what} name {name!r}")
+
+
+def _as_storable(name: str, value: Any) -> tuple[np.ndarray, Any]:
+    arr = np.asarray(value)
+    if arr.dtype.kind == "U":
+        return arr.astype(object), h5py.string_dtype("utf-8")
+    if arr.dtype.kind not in "biufc":
+        raise TypeError(f"write_artefact: dataset {name!r} has unsupported dtype {arr.dtype}")
+    return arr, arr.dtype
+
+
+def write_artefact(
+    path: str | Path,
+    provenance: Provenance,
+    datasets: Mapping[str, np.ndarray],
+    attrs: Mapping[str, AttrValue] | None = None,
+    groups: Mapping[str, Mapping[str, np.ndarray]] | None = None,
+) -> Provenance:
+    """Atomically write one HDF5 artefact (layout in the module docstring).
+
+    Empty ``software_version``/``created`` fields of ``provenance`` are filled with
+    ``regrasp_cli.__version__`` and the current UTC time.  Dataset names may contain
+    ``/``; ``groups`` maps a group path to its datasets.  Numeric, bool and unicode
+    string arrays are supported.  Returns the provenance actually written.
+    """
+    prov = dataclasses.replace(
+        provenance,
+        software_version=provenance.software_version or __version__,
+        created=provenance.created or _utc_now(),
+    )
+    user_attrs = dict(attrs or {})
+    for key, val in user_attrs.items():
+        if not isinstance(key, str) or not key or key in _PROVENANCE_ATTRS or key.startswith(INPUT_PREFIX):
+            raise ValueError(f"write_artefact: attribute name {key!r} is reserved or invalid")
+        if isinstance(val, bool) or not isinstance(val, (str, int, float)):
+            raise TypeError(f"write_artefact: attribute {key!r} must be str, int or float, got {val!r}")
+
+    flat: dict[str, Any] = {}
+    for name, arr in datasets.items():
+        _check_name(name, "dataset")
+        flat[name] = arr
+    for gname, members in (groups or {}).items():
+        _check_name(gname, "group")
+        for name, arr in members.items():
+            _check_name(name, "dataset")
+            full = f"{gname}/{name}"
+            if full in flat:
+                raise ValueError(f"write_artefact: dataset {full!r} given twice")
+            flat[full] = arr
+    stored = {name: _as_storable(name, arr) for name, arr in sorted(flat.items())}
+
+    def writer(tmp: Path) -> None:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["format"] = prov.format
+            f.attrs["format_version"] = prov.format_version
+            f.attrs["software_version"] = prov.software_version
+            f.attrs["created"] = prov.created
+            for name, digest in prov.inputs.items():
+                f.attrs[INPUT_PREFIX + name] = digest
+            for key, val in sorted(user_attrs.items()):
+                f.attrs[key] = val
+            for name, (arr, dtype) in stored.items():
+                f.create_dataset(name, data=arr, dtype=dtype, track_times=False)
+
+    atomic_write(path, writer)
+    return prov
+
+
+@contextmanager
+def _open(path: Path, hint: str | None = None) -> Iterator[h5py.File]:
+    """Open an artefact read-only; h5py failures become one-line :class:`InputError`."""
+    if not path.exists():
+        fix = f"; build it with `{hint}`" if hint else ""
+        raise InputError(path, None, f"no such artefact (file does not exist){fix}")
+    try:
+        f = h5py.File(path, "r")
+    except (OSError, ValueError, RuntimeError) as e:
+        raise InputError(path, None, f"not a readable HDF5 file ({e})") from None
+    try:
+        with f:
+            yield f
+    except (OSError, ValueError, RuntimeError, KeyError) as e:
+        raise InputError(path, None, f"not a readable HDF5 file ({e})") from None
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return value.decode("utf-8")
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _provenance_of(path: Path, f: h5py.File) -> Provenance:
+    attrs = f.attrs
+    fmt = _plain(attrs.get("format"))
+    version = _plain(attrs.get("format_version"))
+    if not isinstance(fmt, str):
+        raise InputError(path, "format", "not a regrasp artefact (no 'format' attribute)")
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise InputError(path, "format_version", f"not a regrasp artefact (format_version is {version!r})")
+    inputs = {k[len(INPUT_PREFIX):]: str(_plain(v)) for k, v in attrs.items() if k.startswith(INPUT_PREFIX)}
+    return Provenance(
+        format=fmt,
+        format_version=version,
+        inputs=inputs,
+        software_version=str(_plain(attrs.get("software_version", ""))),
+        created=str(_plain(attrs.get("created", ""))),
+    )
+
+
+def _short(digest: str | None) -> str:
+    return "none" if digest is None else digest[:12] + "…"
+
+
+def _check(path: Path, found: Provenance, expected: ExpectedProvenance, hint: str) -> None:
+    """Refuse ``found`` unless it matches ``expected`` (see the module docstring)."""
+    if found.format != expected.format:
+        raise InputError(path, "format", f"expected '{expected.format}', found '{found.format}'")
+    if found.format_version < expected.format_version:
+        raise StaleArtefactError(
+            path,
+            "format_version",
+            f"expected format version {expected.format_version}, found {found.format_version} "
+            f"(written by regrasp {found.software_version or '?'}); rebuild it with `{hint}`",
+        )
+    if found.format_version > expected.format_version:
+        raise InputError(
+            path,
+            "format_version",
+            f"expected format version {expected.format_version}, found {found.format_version}: "
+            f"written by a newer regrasp ({found.software_version or '?'}); "
+            f"upgrade regrasp or rebuild it with `{hint}`",
+        )
+    problems: list[tuple[str, str]] = []
+    for name in sorted(set(found.inputs) | set(expected.inputs)):
+        stored, current = found.inputs.get(name), expected.inputs.get(name)
+        if stored == current:
+            continue
+        if stored is None:
+            problems.append((name, f"was built without a {name} input"))
+        elif current is None:
+            problems.append((name, f"was built with a {name} input that is no longer used"))
+        else:
+            problems.append((name, f"was built for a different {name} (stored {_short(stored)}, current {_short(current)})"))
+    if problems:
+        reasons = "; ".join(reason for _, reason in problems)
+        raise StaleArtefactError(path, INPUT_PREFIX + problems[0][0], f"{reasons}; rebuild it with `{hint}`")
+
+
+def read_provenance(path: str | Path) -> Provenance:
+    """The provenance recorded in an artefact, without checking it (for ``show`` commands)."""
+    path = Path(path)
+    with _open(path) as f:
+        return _provenance_of(path, f)
+
+
+def read_artefact(path: str | Path, expected: ExpectedProvenance, rebuild: str | None = None) -> Artefact:
+    """Load an artefact after checking its format, version and input hashes.
+
+    ``rebuild`` is the command quoted in refusals (default: ``regrasp <kind> build``
+    from ``expected.format``).  Raises :class:`InputError` for a missing, unreadable or
+    foreign file and :class:`StaleArtefactError` naming every mismatching input.
+    """
+    path = Path(path)
+    hint = rebuild or _rebuild_hint(expected.format)
+    with _open(path, hint) as f:
+        prov = _provenance_of(path, f)
+        _check(path, prov, expected, hint)
+        attrs = {
+            k: _plain(v) for k, v in f.attrs.items() if k not in _PROVENANCE_ATTRS and not k.startswith(INPUT_PREFIX)
+        }
+        data: dict[str, np.ndarray] = {}
+
+        def visit(name: str, obj: Any) -> None:
+            if isinstance(obj, h5py.Dataset):
+                if h5py.check_string_dtype(obj.dtype) is not None:
+                    data[name] = np.asarray(obj.asstr()[()], dtype=str)
+                else:
+                    data[name] = np.asarray(obj[()])
+
+        f.visititems(visit)
+    return Artefact(path=path, provenance=prov, attrs=attrs, data=data)
+
+
+def is_fresh(path: str | Path, expected: ExpectedProvenance) -> bool:
+    """``True`` if ``path`` exists and matches ``expected``; ``False`` if missing or stale.
+
+    Other refusals (unreadable file, different ``format``, newer ``format_version``)
+    still raise :class:`InputError`: rebuilding would overwrite something unexpected.
+    """
+    path = Path(path)
+    if not path.exists():
+        return False
+    hint = _rebuild_hint(expected.format)
+    try:
+        with _open(path, hint) as f:
+            _check(path, _provenance_of(path, f), expected, hint)
+    except StaleArtefactError:
+        return False
+    return True
