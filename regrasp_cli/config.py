@@ -223,6 +223,8 @@ class RobotSpec:
     rest: Mapping[str, float]
     disabled_collisions: tuple[tuple[str, str], ...]
     self_collision: SelfCollisionOptions = field(default_factory=SelfCollisionOptions)
+    srdf: Path | None = None  # a MoveIt SRDF whose disable_collisions pairs are added
+    srdf_disabled: tuple[tuple[str, str], ...] = ()
 
 
 def _find_package_share(package: str) -> list[Path]:
@@ -256,7 +258,7 @@ def resolve_urdf(file: Path, where: str, value: str) -> tuple[Path, tuple[Path, 
 def load_robot_spec(path: str | Path) -> RobotSpec:
     file, data = read_yaml(path)
     f = Fields(file, data)
-    f.only("format", "urdf", "groups", "hands", "rest", "disabled_collisions", "self_collision")
+    f.only("format", "urdf", "srdf", "groups", "hands", "rest", "disabled_collisions", "self_collision")
     if f.str("format") != ROBOT_FORMAT:
         raise f.error("format", f"expected '{ROBOT_FORMAT}', found {f.data['format']!r}")
     urdf, package_dirs = resolve_urdf(file, "urdf", f.str("urdf"))
@@ -296,7 +298,22 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
         sc = SelfCollisionOptions(samples=s.int("samples", sc.samples, minimum=1), seed=s.int("seed", sc.seed),
                                   never_margin=s.float("never_margin", sc.never_margin))
 
-    return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc)
+    srdf, srdf_pairs = None, ()
+    if f.has("srdf"):
+        srdf, _ = resolve_urdf(file, "srdf", f.str("srdf"))
+        srdf_pairs = tuple(_srdf_disabled(srdf, file))
+    return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc, srdf, srdf_pairs)
+
+
+def _srdf_disabled(srdf: Path, file: Path) -> list[tuple[str, str]]:
+    """``<disable_collisions link1= link2=>`` pairs of a MoveIt SRDF."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(srdf).getroot()
+    except (ET.ParseError, OSError) as exc:
+        raise InputError(file, "srdf", f"cannot parse SRDF {srdf}: {exc}") from None
+    return [(e.get("link1", ""), e.get("link2", "")) for e in root.iter("disable_collisions")]
 
 
 def _hand(h: Fields, side: str) -> HandSpec:

@@ -13,7 +13,7 @@ almost never do), and those are exactly the pairs a hand-over needs.  So "never"
 applied to pairs on one kinematic chain (one link is an ancestor of the other), with a
 distance margin rather than a bare collision test; pairs on different branches (left vs
 right arm) stay checked, at little cost since the broadphase culls far pairs.  Pairs
-listed in robot.yaml's ``disabled_collisions`` are added.
+listed in robot.yaml's ``disabled_collisions`` or in the SRDF it names are added.
 
 The result depends only on the URDF, robot.yaml and the sampling options, so it is cached
 under ``cache/`` keyed by their hashes and never has to be invalidated by hand.
@@ -148,9 +148,11 @@ def disabled_pairs(robot: Robot, cache_dir: Path | None) -> DisabledPairs:
                     "pairs": sorted([a, b, r] for (a, b), r in result.pairs.items())}
             atomic_write_text(path, json.dumps(body, indent=1) + "\n")
     pairs = dict(result.pairs)
-    for i, (a, b) in enumerate(robot.spec.disabled_collisions):
+    listed = [(f"disabled_collisions[{i}]", p) for i, p in enumerate(robot.spec.disabled_collisions)]
+    listed += [(f"srdf ({robot.spec.srdf.name})", p) for p in robot.spec.srdf_disabled]
+    for where, (a, b) in listed:
         for name in (a, b):
             if not robot.model.existFrame(name):
-                raise InputError(robot.spec.file, f"disabled_collisions[{i}]", f"unknown link {name!r}")
-        pairs[tuple(sorted((a, b)))] = "user"
+                raise InputError(robot.spec.file, where, f"unknown link {name!r}")
+        pairs.setdefault(tuple(sorted((a, b))), "user")
     return DisabledPairs(pairs, result.samples, result.never_margin)
