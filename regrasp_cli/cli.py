@@ -59,5 +59,39 @@ def info(ctx: click.Context, scene: Path, seed: int | None) -> None:
     print_info(scene, ctx.obj["cache_dir"], seed)
 
 
+@main.group()
+def grasps() -> None:
+    """Grasp lists: single grasps of each hand for the scene's object (§IV-A)."""
+
+
+@grasps.command("build")
+@click.argument("scene", type=click.Path(path_type=Path))
+@click.option("--hand", type=click.Choice(["right", "left", "both"]), default="both", show_default=True)
+@click.option("--seed", type=int, default=None, help="Seed of the surface sampling (default: planning.seed).")
+@click.option("--jobs", type=int, default=2, show_default=True, help="Parallel worker processes.")
+@click.option("--positions", type=int, default=None, help="Grasp-frame positions in the bounding box.")
+@click.option("--orientations", type=int, default=None, help="Grasp-frame orientations (SO(3) grid).")
+@click.pass_context
+def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, jobs: int,
+                 positions: int | None, orientations: int | None) -> None:
+    """Compute the grasp list of each hand and store it in the cache (HDF5)."""
+    from regrasp_cli.report import run_grasps_build
+
+    run_grasps_build(scene, ctx.obj["cache_dir"], hand, seed, jobs, positions, orientations)
+
+
+@grasps.command("show")
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option("--best", type=int, default=10, show_default=True, help="How many grasps to list.")
+@click.option("--scene", type=click.Path(path_type=Path), default=None,
+              help="Check the file against this scene's robot, object and options; refuse it if stale.")
+@click.pass_context
+def grasps_show(ctx: click.Context, file: Path, best: int, scene: Path | None) -> None:
+    """Print the stored provenance and the best grasps of a grasp list."""
+    from regrasp_cli.report import show_grasps
+
+    show_grasps(file, best, scene, ctx.obj["cache_dir"])
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

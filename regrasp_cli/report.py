@@ -114,3 +114,105 @@ def print_info(scene: Path, cache_dir: Path, seed: int | None, console: Console 
         else:
             verdict = "reachable by neither arm"
         console.print(f"The object's {pose} pose is {verdict}.")
+
+
+def _positive(value, name: str) -> None:
+    from regrasp_cli.errors import InputError
+
+    if value is not None and value < 1:
+        raise InputError(None, name, f"expected an integer >= 1, found {value}")
+
+
+def build_options(scene_seed: int, seed: int | None, jobs: int, positions: int | None, orientations: int | None):
+    from dataclasses import replace
+
+    from regrasp_cli.grasp.build import BuildOptions
+
+    for value, name in ((jobs, "--jobs"), (positions, "--positions"), (orientations, "--orientations")):
+        _positive(value, name)
+    options = BuildOptions(seed=scene_seed if seed is None else seed, jobs=jobs)
+    g = options.grasp
+    g = replace(g, n_positions=positions or g.n_positions, n_orientations=orientations or g.n_orientations)
+    return replace(options, grasp=g)
+
+
+def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, jobs: int,
+                     positions: int | None, orientations: int | None, console: Console | None = None) -> None:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from regrasp_cli.grasp.build import build_grasps
+    from regrasp_cli.config import load_scene_spec
+
+    console = console or Console()
+    spec = load_scene_spec(scene)
+    options = build_options(spec.planning.seed, seed, jobs, positions, orientations)
+    hands = ["right", "left"] if hand == "both" else [hand]
+    reports = []
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=console, transient=False) as bar:
+        for h in hands:
+            task = bar.add_task(f"{h} hand: grasp frames", total=None)
+            glist, rep = build_grasps(scene, cache_dir, h, options,
+                                      progress=lambda done, total, t=task: bar.update(t, completed=done, total=total))
+            reports.append((glist, rep))
+    t = Table(title=f"Grasp lists ({spec.object.mesh}, friction {spec.object.friction:g})")
+    for c in ("hand", "frames tried", "palm in object", "enough contacts", "force closure", "kept (distinct)",
+              "best quality", "time (s)", "grasps/s"):
+        t.add_column(c, justify="right")
+    for glist, rep in reports:
+        total = sum(rep.seconds.values())
+        t.add_row(rep.hand, str(rep.frames), str(rep.frames_palm_blocked), str(rep.frames_with_contacts),
+                  str(rep.force_closure), str(rep.kept),
+                  f"{glist.scores[0, -1]:.3f}" if len(glist) else "-", f"{total:.1f}",
+                  f"{rep.kept / total:.1f}" if total > 0 else "-")
+    console.print(t)
+    t = Table(title="Time per stage (s)")
+    t.add_column("stage")
+    for _, rep in reports:
+        t.add_column(rep.hand, justify="right")
+    for stage in reports[0][1].seconds:
+        t.add_row(stage, *(f"{rep.seconds[stage]:.2f}" for _, rep in reports))
+    console.print(t)
+    for _, rep in reports:
+        console.print(f"{rep.hand} hand: {rep.path}")
+
+
+def show_grasps(file: Path, best: int, scene: Path | None, cache_dir: Path, console: Console | None = None) -> None:
+    from regrasp_cli.grasp.build import BuildOptions, provenance, read_grasp_list
+    from regrasp_cli.store import read_provenance
+
+    console = console or Console()
+    prov = read_provenance(file)
+    expected = None
+    if scene is not None:
+        problem = load_problem(scene, cache_dir)
+        hand = str(_hand_of(file))
+        expected = provenance(problem, hand, build_options(problem.spec.planning.seed, None, 1, None, None))
+        # options are part of the hashed parameters: a list built with other options is stale too
+    glist = read_grasp_list(file, expected)
+    t = Table(title=f"{file}")
+    t.add_column("provenance")
+    t.add_column("value")
+    t.add_row("format", f"{prov.format} v{prov.format_version}")
+    t.add_row("software", prov.software_version)
+    t.add_row("created", prov.created)
+    for k, v in prov.inputs.items():
+        t.add_row(f"sha256 {k}", v[:16] + "…")
+    t.add_row("hand", glist.hand)
+    t.add_row("grasps", str(len(glist)))
+    console.print(t)
+    t = Table(title=f"Best {min(best, len(glist))} grasps")
+    for c in ("#", "fingers in contact", "epsilon", "centroid", "ellipsoid", "curvature", "total",
+              "hand position in object (m)"):
+        t.add_column(c, justify="right")
+    for i in range(min(best, len(glist))):
+        fingers = ",".join(n for n, c in zip(glist.finger_names, glist.in_contact[i]) if c)
+        t.add_row(str(i), fingers, *(f"{v:.3f}" for v in glist.scores[i]), _fmt(glist.X_OG[i, :3, 3]))
+    console.print(t)
+
+
+def _hand_of(file: Path) -> str:
+    import h5py
+
+    with h5py.File(file, "r") as f:
+        return f.attrs["hand"]

@@ -47,6 +47,10 @@ def load_problem(path: str | Path, cache_dir: Path | None) -> Problem:
     robot = load_robot(spec.robot)
     obj = load_object_mesh(spec.object.mesh, base_dir=spec.file.parent, scale=spec.object.scale,
                            file=str(spec.file), field="object.mesh")
+    for i, ob in enumerate(spec.obstacles):  # fail here, naming the scene file and field
+        if ob.shape == "mesh":
+            load_object_mesh(str(ob.mesh), base_dir=ob.mesh.parent, scale=ob.size[0],
+                             file=str(spec.file), field=f"obstacles[{i}].mesh.file")
     q = {}
     for key, value in (("robot_start", spec.task.robot_start), ("robot_goal", spec.task.robot_goal)):
         if value == "rest":

@@ -147,12 +147,16 @@ def arm_and_hand(u: Urdf, side: str) -> None:
     t = -s
     for name, y in (("index", t * 0.03), ("middle", 0.0), ("ring", -t * 0.03)):
         finger(u, p, name, f"{p}palm", [0.10, y, 0.0], np.eye(3), t, FINGER_PROX, FINGER_MID)
-    u.joint(f"{p}thumb_base", f"{p}palm", f"{p}thumb_root", [0.035, t * 0.045, 0.0],
-            axis=[t, 0, 0], limits=(0.0, 1.57), vel=2.0)
+    # Thumb: rooted at the side of the palm, pointing out of the palm and 30 deg forward,
+    # curling forwards towards the finger pads (opposition); the base joint swings its
+    # plane of flexion from the palm's side towards the palm's middle.
+    u.joint(f"{p}thumb_base", f"{p}palm", f"{p}thumb_root", [0.03, t * 0.045, 0.0],
+            axis=[t, 0, 0], limits=(0.0, 1.2), vel=2.0)
     u.link(f"{p}thumb_root", mass=0.02)
-    R_thumb = Rotation.from_euler("z", t * np.pi / 3).as_matrix()
+    a = np.radians(30)
+    R_thumb = np.column_stack([[np.sin(a), 0, np.cos(a)], [0, -1, 0], [np.cos(a), 0, -np.sin(a)]])
     finger(u, p, "thumb", f"{p}thumb_root", [0, 0, 0], R_thumb, t, THUMB_PROX, THUMB_MID)
-    u.joint(f"{p}grasp_joint", f"{p}palm", f"{p}grasp_frame", [0.10, 0.0, 0.06])
+    u.joint(f"{p}grasp_joint", f"{p}palm", f"{p}grasp_frame", [0.135, 0.0, 0.065])
     u.link(f"{p}grasp_frame", mass=0.001)
 
 

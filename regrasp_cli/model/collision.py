@@ -19,11 +19,15 @@ Pairs checked:
 * object-obstacle: only when the object moves with a hand; it may rest on a support with
   up to ``support_tolerance`` of penetration (the pick and place configurations).
 
-Tolerances are coal security margins (a negative margin allows that much penetration).
+A tolerance is applied by checking an *eroded* copy of the primitive (sphere, capsule,
+box, cylinder) shrunk by the tolerance on every side against the object: coal refuses
+negative security margins for meshes (``BVHModel``), and the object is a mesh.  A
+geometry that cannot be eroded (a mesh) is checked with no tolerance.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections import deque
 from dataclasses import dataclass
 from typing import Iterable, Sequence
@@ -81,6 +85,20 @@ def obstacle_geometry(ob: ObstacleSpec) -> coal.CollisionGeometry:
     return mesh_geometry(mesh.mesh)
 
 
+def eroded_geometry(geom: coal.CollisionGeometry, tol: float) -> coal.CollisionGeometry | None:
+    """The primitive ``geom`` shrunk by ``tol`` (m) on every side, or None for other shapes."""
+    tiny = 1e-6
+    if isinstance(geom, coal.Sphere):
+        return coal.Sphere(max(geom.radius - tol, tiny))
+    if isinstance(geom, coal.Capsule):
+        return coal.Capsule(max(geom.radius - tol, tiny), 2.0 * geom.halfLength)
+    if isinstance(geom, coal.Box):
+        return coal.Box(*np.maximum(2.0 * (geom.halfSide - tol), tiny))
+    if isinstance(geom, coal.Cylinder):
+        return coal.Cylinder(max(geom.radius - tol, tiny), max(2.0 * (geom.halfLength - tol), tiny))
+    return None
+
+
 class CollisionWorld:
     """Checks full-robot configurations against the robot itself, obstacles and the object."""
 
@@ -98,6 +116,7 @@ class CollisionWorld:
                                     obstacle_geometry(ob))
             self.obstacle_geoms.append(gm.addGeometryObject(go))
         self.object_geom = None
+        self._alias: dict[int, int] = {}  # eroded copy -> original geometry
         if obj is not None:
             if obj.attached_to is None:
                 joint, frame, X_JO = 0, 0, obj.X_PO
@@ -129,16 +148,24 @@ class CollisionWorld:
             touching = set(obj.touching) | ({obj.attached_to} if obj.attached_to else set())
             tips = {robot.model.frames[f].name for h in touching for f in robot.hands[h].tip_frames}
             for a in range(n_robot):
-                gm.addCollisionPair(pin.CollisionPair(a, self.object_geom))
-                margins.append(-options.contact_tolerance if link[a] in tips else 0.0)
+                g = self._eroded(gm, a, options.contact_tolerance) if link[a] in tips else a
+                gm.addCollisionPair(pin.CollisionPair(g, self.object_geom))
+                margins.append(0.0)
             if obj.attached_to is not None:
                 for o in self.obstacle_geoms:
-                    gm.addCollisionPair(pin.CollisionPair(self.object_geom, o))
-                    margins.append(-options.support_tolerance)
+                    gm.addCollisionPair(pin.CollisionPair(self.object_geom, self._eroded(gm, o, options.support_tolerance)))
+                    margins.append(0.0)
         self.geometry_model = gm
         self.geometry_data = gm.createData()
         for k, m in enumerate(margins):
-            self.geometry_data.collisionRequests[k].security_margin = m
+            req = self.geometry_data.collisionRequests[k]
+            req.security_margin = m
+            # No GJK warm start from the previous query: with pinocchio's cached guesses coal
+            # misses about 1% of collisions (e.g. two deeply overlapping palm boxes).
+            req.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
+            with warnings.catch_warnings():  # deprecated in coal, but pinocchio still sets it
+                warnings.simplefilter("ignore", DeprecationWarning)
+                req.enable_cached_gjk_guess = False
         self.data = robot.model.createData()
         self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
             robot.model, self.geometry_model, self.geometry_data)
@@ -148,7 +175,20 @@ class CollisionWorld:
     def n_pairs(self) -> int:
         return len(self.geometry_model.collisionPairs)
 
+    def _eroded(self, gm: pin.GeometryModel, gid: int, tol: float) -> int:
+        """Index of a copy of geometry ``gid`` shrunk by ``tol`` (added to ``gm``), or ``gid``
+        itself when its shape cannot be eroded (then no tolerance applies)."""
+        go = gm.geometryObjects[gid]
+        geom = eroded_geometry(go.geometry, tol) if tol > 0 else None
+        if geom is None:
+            return gid
+        copy = gm.addGeometryObject(pin.GeometryObject(f"{go.name}:eroded", go.parentJoint, go.parentFrame,
+                                                       go.placement, geom))
+        self._alias[copy] = gid
+        return copy
+
     def geometry_name(self, gid: int) -> str:
+        gid = self._alias.get(gid, gid)
         go = self.geometry_model.geometryObjects[gid]
         if gid < len(self.robot_geoms):
             return self.robot.model.frames[go.parentFrame].name

@@ -1,0 +1,1 @@
+"""Grasp synthesis and scoring for single-hand grasps."""

@@ -1,0 +1,243 @@
+"""`regrasp grasps build`: the grasp list of a hand for an object (Saut et al. 2010, §IV-A).
+
+Pipeline: object surface model (:mod:`.surface`) -> finger workspace spheres
+(:mod:`.workspace`, Algorithm 1, cached) -> grasp frames (:mod:`.frames`: positions in
+the object's bounding box x an incremental SO(3) grid) -> one grasp attempt per frame
+(:mod:`.single`), in parallel with joblib -> force-closure filter and quality
+(:mod:`.quality`) -> near-duplicates removed -> sorted by quality -> HDF5 artefact.
+
+A grasp list depends only on the hand (URDF, robot.yaml), the object mesh, the friction
+coefficient and the options: it is context independent (no obstacles), as in the paper.
+Two grasps are near-duplicates when their hand poses differ by less than
+``duplicate_distance`` in position and ``duplicate_angle`` in orientation; the better one
+is kept.  The result is deterministic for a given seed whatever the number of jobs.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from regrasp_cli.errors import InputError
+from regrasp_cli.grasp.frames import grasp_frames
+from regrasp_cli.grasp.quality import GraspScores
+from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, grasp_for_frame
+from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
+from regrasp_cli.grasp.workspace import WorkspaceOptions, hand_workspace
+from regrasp_cli.model.objects import mesh_sha256
+from regrasp_cli.scene import Problem, load_problem
+from regrasp_cli.spatial import rotation_angle
+from regrasp_cli.store import Provenance, read_artefact, sha256_params, write_artefact
+
+FORMAT, FORMAT_VERSION = "regrasp.grasps", 1
+SCORE_NAMES = ("epsilon", "centroid", "ellipsoid", "curvature", "total")
+
+
+@dataclass(frozen=True)
+class BuildOptions:
+    grasp: GraspOptions = field(default_factory=GraspOptions)
+    workspace: WorkspaceOptions = field(default_factory=WorkspaceOptions)
+    seed: int = 0
+    jobs: int = 1
+
+
+@dataclass(frozen=True)
+class GraspList:
+    """A hand's grasp list, best first (arrays over grasps, first axis k)."""
+
+    hand: str
+    finger_names: tuple[str, ...]
+    X_OG: np.ndarray  # (k, 4, 4) grasp frame G in the object frame O
+    finger_q: np.ndarray  # (k, n_hand_joints)
+    in_contact: np.ndarray  # (k, n_fingers) bool
+    points: np.ndarray  # (k, n_fingers, 3) contact points, frame O (NaN: no contact)
+    normals: np.ndarray  # (k, n_fingers, 3) outward normals, frame O
+    scores: np.ndarray  # (k, 5): epsilon, centroid, ellipsoid, curvature, total
+    frame_index: np.ndarray  # (k,) index of the grasp frame each grasp came from
+
+    def __len__(self) -> int:
+        return len(self.X_OG)
+
+
+@dataclass(frozen=True)
+class BuildReport:
+    hand: str
+    path: Path
+    frames: int
+    frames_palm_blocked: int
+    frames_with_contacts: int  # frames that got enough contacts for the stability test
+    force_closure: int
+    kept: int  # after removing near-duplicates
+    seconds: dict[str, float]  # time per stage
+
+
+# ------------------------------------------------------------------ inputs and paths
+
+
+def _params(problem: Problem, hand: str, options: BuildOptions) -> dict:
+    return {"hand": hand, "friction": problem.spec.object.friction, "seed": options.seed,
+            "contact_tolerance": problem.spec.planning.contact_tolerance,
+            "grasp": asdict(options.grasp), "workspace": asdict(options.workspace)}
+
+
+def provenance(problem: Problem, hand: str, options: BuildOptions) -> Provenance:
+    r = problem.robot
+    return Provenance(FORMAT, FORMAT_VERSION, {
+        "urdf": r.urdf_sha256, "robot_yaml": r.robot_yaml_sha256, "mesh": mesh_sha256(problem.object),
+        "params": sha256_params(_params(problem, hand, options))})
+
+
+def artefact_path(cache_dir: Path, problem: Problem, hand: str, options: BuildOptions) -> Path:
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", problem.object.name.replace("builtin:", "builtin_"))
+    key = provenance(problem, hand, options).inputs["params"][:10]
+    return Path(cache_dir) / "grasps" / f"{name}-{hand}-{key}.h5"
+
+
+# ------------------------------------------------------------------ per-process work
+
+
+@lru_cache(maxsize=4)
+def _context(scene: str, cache_dir: str, hand: str, options: BuildOptions):
+    """Everything a worker needs, built once per process (joblib reuses its workers)."""
+    problem = load_problem(scene, Path(cache_dir))
+    robot = problem.robot
+    if hand not in robot.hands:
+        raise InputError(robot.spec.file, "hands", f"the robot has no {hand} hand (it has: {', '.join(robot.hands)})")
+    tip_radius = min(f.tip_radius for f in robot.hands[hand].spec.fingers)
+    surface = build_surface(problem.object.mesh, sampling_step(tip_radius), np.random.default_rng(options.seed))
+    ws = hand_workspace(robot, hand, options.workspace, Path(cache_dir))
+    hm = HandModel(robot, hand, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance)
+    rho = float(np.linalg.norm(problem.object.extents) / 2)
+    frames = grasp_frames(problem.object.mesh.bounds, options.grasp.n_positions, options.grasp.n_orientations)
+    return problem, surface, ws, hm, rho, frames
+
+
+def _run_chunk(scene: str, cache_dir: str, hand: str, options: BuildOptions, indices: np.ndarray):
+    problem, surface, ws, hm, rho, frames = _context(scene, cache_dir, hand, options)
+    friction = problem.spec.object.friction
+    grasps, stats = [], {}
+    for i in indices:
+        g, st = grasp_for_frame(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
+        for k, v in st.items():
+            stats[k] = stats.get(k, 0) + v
+        if g is not None:
+            grasps.append(g)
+    return grasps, stats
+
+
+# ------------------------------------------------------------------ build
+
+
+def remove_duplicates(grasps: list[Grasp], distance: float, angle: float) -> list[Grasp]:
+    """Best first; a grasp is dropped when a better kept one has its hand within
+    ``distance`` (m) and ``angle`` (rad)."""
+    ordered = sorted(grasps, key=lambda g: (-g.scores.total, g.frame_index))
+    kept: list[Grasp] = []
+    for g in ordered:
+        if not any(np.linalg.norm(g.X_OG[:3, 3] - k.X_OG[:3, 3]) < distance
+                   and rotation_angle(g.X_OG[:3, :3].T @ k.X_OG[:3, :3]) < angle for k in kept):
+            kept.append(g)
+    return kept
+
+
+def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
+                 progress=None) -> tuple[GraspList, BuildReport]:
+    """Compute and store the grasp list of ``hand``; ``progress(done, total)`` is called
+    as frames complete."""
+    from joblib import Parallel, delayed
+
+    scene, cache_dir = Path(scene).resolve(), Path(cache_dir).resolve()
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    problem, surface, ws, _, _, frames = _context(str(scene), str(cache_dir), hand, options)
+    t_prep = time.perf_counter() - t0
+
+    n = len(frames)
+    n_chunks = max(1, min(n, 8 * max(1, options.jobs)))
+    chunks = np.array_split(np.arange(n), n_chunks)
+    t1 = time.perf_counter()
+    results, done = [], 0
+    runner = Parallel(n_jobs=options.jobs, return_as="generator")
+    for chunk, res in zip(chunks, runner(delayed(_run_chunk)(str(scene), str(cache_dir), hand, options, c)
+                                         for c in chunks)):
+        results.append(res)
+        done += len(chunk)
+        if progress:
+            progress(done, n)
+    t_frames = time.perf_counter() - t1
+
+    t2 = time.perf_counter()
+    grasps = [g for gs, _ in results for g in gs]
+    stats: dict[str, int] = {}
+    for _, st in results:
+        for k, v in st.items():
+            stats[k] = stats.get(k, 0) + v
+    kept = remove_duplicates(grasps, options.grasp.duplicate_distance, options.grasp.duplicate_angle)
+    glist = _to_list(problem, hand, kept)
+    path = artefact_path(cache_dir, problem, hand, options)
+    write_grasp_list(path, provenance(problem, hand, options), glist, options)
+    t_write = time.perf_counter() - t2
+
+    tested = len(grasps) + stats.get("not_force_closure", 0)
+    report = BuildReport(hand, path, n, stats.get("palm", 0), tested + stats.get("hand_collision", 0),
+                         len(grasps), len(kept),
+                         {"surface + workspace + frames": t_prep, "grasp search (frames)": t_frames,
+                          "duplicates + write": t_write})
+    return glist, report
+
+
+def _to_list(problem: Problem, hand: str, grasps: list[Grasp]) -> GraspList:
+    h = problem.robot.hands[hand]
+    nf, nj = len(h.spec.fingers), len(h.idx)
+    k = len(grasps)
+    stack = (lambda xs, shape: np.array(xs, dtype=float).reshape((k, *shape)))
+    return GraspList(
+        hand, tuple(f.name for f in h.spec.fingers),
+        stack([g.X_OG for g in grasps], (4, 4)), stack([g.finger_q for g in grasps], (nj,)),
+        np.array([g.in_contact for g in grasps], dtype=bool).reshape(k, nf),
+        stack([g.points for g in grasps], (nf, 3)), stack([g.normals for g in grasps], (nf, 3)),
+        stack([[getattr(g.scores, s) for s in SCORE_NAMES] for g in grasps], (5,)),
+        np.array([g.frame_index for g in grasps], dtype=np.int64))
+
+
+# ------------------------------------------------------------------ storage
+
+
+def write_grasp_list(path: Path, prov: Provenance, g: GraspList, options: BuildOptions) -> None:
+    write_artefact(path, prov, {
+        "hand_in_object": g.X_OG, "finger_q": g.finger_q, "in_contact": g.in_contact,
+        "contact_points": g.points, "contact_normals": g.normals, "scores": g.scores,
+        "frame_index": g.frame_index,
+        "finger_names": np.array(g.finger_names), "score_names": np.array(SCORE_NAMES),
+    }, attrs={"hand": g.hand, "frames": options.grasp.n_positions * options.grasp.n_orientations})
+
+
+def read_grasp_list(path: Path, expected: Provenance | None = None) -> GraspList:
+    """Load a grasp list; with ``expected``, refuse it when its inputs changed."""
+    from regrasp_cli.store import read_provenance
+
+    a = read_artefact(path, expected or read_provenance(path), rebuild="regrasp grasps build")
+    names = tuple(s.decode() if isinstance(s, bytes) else str(s) for s in a["finger_names"])
+    return GraspList(str(a.attrs["hand"]), names, a["hand_in_object"], a["finger_q"], a["in_contact"].astype(bool),
+                     a["contact_points"], a["contact_normals"], a["scores"], a["frame_index"])
+
+
+def load_or_build(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> GraspList:
+    """The cached grasp list if fresh, else a new one (used by the online planner)."""
+    from regrasp_cli.store import is_fresh
+
+    problem = load_problem(scene, cache_dir)
+    prov = provenance(problem, hand, options)
+    path = artefact_path(cache_dir, problem, hand, options)
+    if path.is_file() and is_fresh(path, prov):
+        return read_grasp_list(path, prov)
+    return build_grasps(scene, cache_dir, hand, options)[0]
+
+
+def scores_of(g: GraspList, i: int) -> GraspScores:
+    return GraspScores(*map(float, g.scores[i]))

@@ -1,0 +1,247 @@
+"""Single grasps of one hand for one grasp frame: Saut et al. 2010, §IV-A-2 and §IV-A-3.
+
+For a grasp frame X_OG (hand grasp frame G in the object frame O) the grasp is built
+finger by finger, in robot.yaml order (the thumb first: no stable grasp exists without
+it).  For finger i, its workspace spheres (biggest first, :mod:`.workspace`) are
+intersected with the object's surface kd-tree; each surface point found is a contact
+candidate if its outward normal faces the finger (towards the finger's first joint),
+finger IK puts the fingertip-sphere centre at ``p + r_tip n`` (seeded from the nearest
+workspace sample), and the finger is checked against the object (the fingertip may touch
+it within ``contact_tolerance``), the palm and the fingers 1..i-1.  A finger without a
+contact stays open.  With enough contacts (3 point contacts, 2 soft ones), the whole hand
+is checked against the object and the grasp goes to the force-closure test and quality
+score (:mod:`.quality`).
+
+The hand is checked in isolation (no arm, no environment): collisions with the
+environment and the rest of the robot are the business of the online stage (§IV-B).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from regrasp_cli.grasp.quality import GraspScores, QualityWeights, force_ellipsoid_axis, grasp_quality
+from regrasp_cli.grasp.surface import Surface
+from regrasp_cli.grasp.workspace import FingerWorkspace
+from regrasp_cli.model.collision import eroded_geometry, mesh_geometry
+from regrasp_cli.model.robot import Robot
+from regrasp_cli.spatial import inverse
+
+
+@dataclass(frozen=True)
+class GraspOptions:
+    """Options of the single-grasp search (metres, radians)."""
+
+    n_positions: int = 27  # grasp-frame positions in the object's bounding box
+    n_orientations: int = 256  # grasp-frame orientations (incremental SO(3) grid)
+    candidates_per_finger: int = 6  # contact candidates tried per finger before leaving it open
+    contact_tolerance: float = 0.002  # fingertip-object penetration allowed, m
+    ik_tolerance: float = 2e-4  # fingertip placement error accepted, m
+    ik_iterations: int = 30
+    cone_edges: int = 8  # linearised friction cone
+    duplicate_distance: float = 0.01  # m: grasps closer than this (hand position) ...
+    duplicate_angle: float = 0.2  # rad: ... and this (hand orientation) are duplicates
+    weights: QualityWeights = QualityWeights()
+
+
+@dataclass(frozen=True)
+class Grasp:
+    """A force-closure grasp.  Arrays per finger (n_fingers, ...); fingers without contact
+    have ``in_contact`` False and NaN points/normals."""
+
+    frame_index: int
+    X_OG: np.ndarray  # (4, 4) grasp frame in the object frame ("hand in object")
+    finger_q: np.ndarray  # (n_hand_joints,) finger joint values, robot.yaml order
+    in_contact: np.ndarray  # (n_fingers,) bool
+    points: np.ndarray  # (n_fingers, 3) contact points on the surface, frame O
+    normals: np.ndarray  # (n_fingers, 3) outward surface normals, frame O
+    scores: GraspScores
+
+
+class HandModel:
+    """The hand alone, with the object attached to its grasp frame: the scratch for the
+    per-frame grasp search (one per process)."""
+
+    def __init__(self, robot: Robot, hand: str, mesh, disabled_links: set[tuple[str, str]], tolerance: float):
+        self.robot, self.hand = robot, robot.hands[hand]
+        h = self.hand
+        model = robot.model
+        self.q = robot.q_rest.copy()
+        self.q[h.idx] = h.open
+        # geometries of the palm and fingers: those whose joint is in the hand's subtree
+        hand_joints = {model.getJointId(robot.joint_names[i]) for i in h.idx}
+        palm_joint = model.frames[h.grasp_frame].parentJoint
+        self.finger_of_joint = {}
+        for f, idx in enumerate(h.finger_idx):
+            for i in idx:
+                self.finger_of_joint[model.getJointId(robot.joint_names[i])] = f
+        src = robot.collision_model
+        gm = pin.GeometryModel()
+        self.owner: list[int] = []  # finger index of each geometry, -1 for the palm
+        tips = {model.frames[t].name for t in h.tip_frames}
+        links = []
+        for go in src.geometryObjects:
+            j = go.parentJoint
+            if j == palm_joint or j in hand_joints:
+                name = model.frames[go.parentFrame].name
+                geom = go.geometry
+                if name in tips:
+                    geom = eroded_geometry(go.geometry, tolerance) or go.geometry
+                gm.addGeometryObject(pin.GeometryObject(go.name, j, go.parentFrame, go.placement, geom))
+                self.owner.append(self.finger_of_joint.get(j, -1))
+                links.append(name)
+        # object attached to the grasp frame's joint: placement set per grasp frame
+        f = model.frames[h.grasp_frame]
+        self.X_JG = f.placement.homogeneous
+        self.obj = gm.addGeometryObject(pin.GeometryObject("object", f.parentJoint, h.grasp_frame, pin.SE3.Identity(),
+                                                           mesh_geometry(mesh)))
+        n = len(self.owner)
+        pairs_of = {f: [] for f in range(-1, len(h.finger_idx))}
+        self.pair_fingers = []
+        for a in range(n):
+            gm.addCollisionPair(pin.CollisionPair(a, self.obj))
+            self.pair_fingers.append((self.owner[a], None))
+        for a in range(n):
+            for b in range(a + 1, n):
+                fa, fb = self.owner[a], self.owner[b]
+                if fa == fb or tuple(sorted((links[a], links[b]))) in disabled_links:
+                    continue
+                gm.addCollisionPair(pin.CollisionPair(a, b))
+                self.pair_fingers.append((fa, fb))
+        self.gm, self.gd = gm, gm.createData()
+        for k, (fa, fb) in enumerate(self.pair_fingers):
+            for f_ in {fa, fb} - {None}:
+                pairs_of[f_].append(k)
+        self.pairs_of = pairs_of
+        self.data = model.createData()
+
+    def set_object(self, X_OG: np.ndarray) -> None:
+        """Place the object so that the grasp frame is at X_OG in the object frame."""
+        X_JO = self.X_JG @ inverse(X_OG)
+        self.gm.geometryObjects[self.obj].placement = pin.SE3(X_JO[:3, :3].copy(), X_JO[:3, 3].copy())
+
+    def collides(self, q: np.ndarray, fingers_placed: set[int], finger: int | None) -> bool:
+        """Collision of finger ``finger`` (or of the whole hand when None) with the object,
+        the palm and the ``fingers_placed``."""
+        pin.updateGeometryPlacements(self.robot.model, self.data, self.gm, self.gd, self.robot.to_pin(q))
+        if finger is None:
+            ks = range(len(self.pair_fingers))
+        else:
+            allowed = fingers_placed | {-1, finger, None}  # None: the object
+            ks = [k for k in self.pairs_of[finger] if set(self.pair_fingers[k]) <= allowed]
+        for k in ks:
+            if pin.computeCollision(self.gm, self.gd, k):
+                return True
+        return False
+
+
+def _finger_ik(robot: Robot, data, q: np.ndarray, idx: np.ndarray, tip: int, p_W: np.ndarray,
+               iters: int, tol: float) -> bool:
+    """Damped least squares on the fingertip position; edits q[idx] in place."""
+    model = robot.model
+    lo, hi = robot.lower[idx], robot.upper[idx]
+    cols = robot._idx_q[idx]
+    last = np.inf
+    for _ in range(iters):
+        qp = robot.to_pin(q)
+        pin.forwardKinematics(model, data, qp)
+        e = p_W - pin.updateFramePlacement(model, data, tip).translation
+        err = e @ e
+        if err < tol * tol:
+            return True
+        if err > 0.8 * last:  # stalled (typically against a joint limit): give up
+            return False
+        last = err
+        J = pin.computeFrameJacobian(model, data, qp, tip, pin.LOCAL_WORLD_ALIGNED)[:3, cols]
+        JJt = J @ J.T
+        JJt[np.diag_indices(3)] += 1e-6
+        q[idx] = np.clip(q[idx] + J.T @ np.linalg.solve(JJt, e), lo, hi)
+    return False
+
+
+def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surface: Surface, X_OG: np.ndarray,
+                    frame_index: int, friction: float, rho: float, options: GraspOptions) -> tuple[Grasp | None, dict]:
+    """The grasp of one grasp frame, or None; plus counters for the summary."""
+    robot, h = hm.robot, hm.hand
+    stats = {"contacts": 0, "ik": 0, "collisions": 0, "palm": 0, "few_contacts": 0, "hand_collision": 0,
+             "not_force_closure": 0}
+    hm.set_object(X_OG)
+    q = hm.q.copy()
+    if hm.collides(q, set(), -1):  # the palm inside the object: no grasp from this frame
+        stats["palm"] = 1
+        return None, stats
+    X_WG = robot.fk(q, h.grasp_frame)  # hand pose with the arm at rest (the frame is what matters)
+    X_WO = X_WG @ inverse(X_OG)
+    X_GO = inverse(X_OG)
+    n_f = len(h.finger_idx)
+    in_contact = np.zeros(n_f, dtype=bool)
+    points, normals = np.full((n_f, 3), np.nan), np.full((n_f, 3), np.nan)
+    axes = np.zeros((n_f, 3))
+    placed: set[int] = set()
+    for f, ws in enumerate(workspaces):
+        idx, tip = h.finger_idx[f], h.tip_frames[f]
+        r_tip = h.spec.fingers[f].tip_radius
+        root_O = X_OG[:3, :3] @ ws.root + X_OG[:3, 3]
+        tried = 0
+        for c_G, r in zip(ws.centres, ws.radii):
+            c_O = X_OG[:3, :3] @ c_G + X_OG[:3, 3]
+            cand = surface.tree.query_ball_point(c_O, r + r_tip)
+            if not cand:
+                continue
+            cand = np.asarray(cand)
+            p, n = surface.points[cand], surface.normals[cand]
+            # the fingertip must push into the surface as the finger closes: the outward
+            # normal opposes the closing direction of the nearest workspace sample
+            tip_G = (p + r_tip * n) @ X_GO[:3, :3].T + X_GO[:3, 3]
+            near = ws.tree.query(tip_G)[1]
+            closing_O = ws.sample_closing[near] @ X_OG[:3, :3].T
+            facing = -np.einsum("ij,ij->i", n, closing_O)
+            keep = facing > 0.2
+            cand, p, n, facing, near = cand[keep], p[keep], n[keep], facing[keep], near[keep]
+            order = np.argsort(-facing, kind="stable")  # squarest pushes first
+            stats["contacts"] += len(order)
+            for k in order:
+                if tried >= options.candidates_per_finger:
+                    break
+                tried += 1
+                target_O = p[k] + r_tip * n[k]
+                qf = q.copy()
+                qf[idx] = ws.sample_q[near[k]]
+                p_W = X_WO[:3, :3] @ target_O + X_WO[:3, 3]
+                if not _finger_ik(robot, hm.data, qf, idx, tip, p_W, options.ik_iterations, options.ik_tolerance):
+                    continue
+                stats["ik"] += 1
+                if hm.collides(qf, placed, f):
+                    stats["collisions"] += 1
+                    continue
+                q = qf
+                placed.add(f)
+                in_contact[f] = True
+                points[f], normals[f] = p[k], n[k]
+                pin.computeJointJacobians(robot.model, hm.data, robot.to_pin(q))
+                J = pin.getFrameJacobian(robot.model, hm.data, tip, pin.LOCAL_WORLD_ALIGNED)[:3, robot._idx_q[idx]]
+                axes[f] = X_OG[:3, :3] @ (X_WG[:3, :3].T @ force_ellipsoid_axis(J))
+                break
+            if in_contact[f] or tried >= options.candidates_per_finger:
+                break
+        if f == 0 and not in_contact[0]:  # the thumb: no stable grasp without it (§IV-A-2)
+            stats["few_contacts"] = 1
+            return None, stats
+    need = 2 if h.spec.contact == "soft" else 3
+    if in_contact.sum() < need:
+        stats["few_contacts"] = 1
+        return None, stats
+    if hm.collides(q, set(range(n_f)), None):
+        stats["hand_collision"] = 1
+        return None, stats
+    c = in_contact
+    kappa = surface.curvature[surface.tree.query(points[c])[1]]
+    scores = grasp_quality(points[c], normals[c], friction, surface.mass_centre, axes[c], kappa, rho,
+                           options.weights, contact=h.spec.contact, n_edges=options.cone_edges)
+    if not scores.is_force_closure:
+        stats["not_force_closure"] = 1
+        return None, stats
+    return Grasp(frame_index, X_OG.copy(), q[h.idx].copy(), in_contact, points, normals, scores), stats

@@ -1,0 +1,228 @@
+"""Finger workspaces approximated by spheres: Algorithm 1 of Saut et al. 2010, §IV-A-2.
+
+For each finger, the fingertip-sphere centre positions (in the hand's grasp frame G) are
+sampled on an *interior* grid W (every joint over its range) and an *envelope* grid E
+(one joint held at its lower, then upper limit, the others sampled).  Spheres are then
+grown greedily: the interior point farthest from E and from the spheres found so far is
+the centre of the next sphere, whose radius is that distance; interior points inside it
+are removed; stop after ``k_max`` spheres or when the radius falls below ``r_min``.  The
+spheres come out biggest first, i.e. farthest from the joint limits first, which is the
+order in which contacts are searched.
+
+The interior samples are kept with their joint values: the nearest one seeds finger IK.
+Computed once per hand model and cached (HDF5, keyed by the URDF, robot.yaml and options).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import asdict, dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial import cKDTree
+
+from regrasp_cli.model.robot import Robot
+from regrasp_cli.spatial import inverse
+from regrasp_cli.store import Provenance, is_fresh, read_artefact, sha256_params, write_artefact
+
+FORMAT, FORMAT_VERSION = "regrasp.workspace", 3
+
+
+@dataclass(frozen=True)
+class WorkspaceOptions:
+    interior_samples: int = 4096  # about this many W points per finger
+    envelope_samples: int = 4096  # about this many E points per finger
+    k_max: int = 30  # at most this many spheres per finger
+    r_min: float = 0.004  # m, smallest sphere kept
+
+
+@dataclass(frozen=True)
+class FingerWorkspace:
+    """Spheres (centres (k, 3) and radii (k,), metres, frame G) biggest first, plus the
+    interior samples: positions (m, 3) in G, joint values (m, n_joints) and the unit
+    direction (m, 3) in G in which the fingertip moves when the finger closes."""
+
+    centres: np.ndarray
+    radii: np.ndarray
+    samples: np.ndarray
+    sample_q: np.ndarray
+    sample_closing: np.ndarray
+    root: np.ndarray  # (3,) position in G of the finger's first joint
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        return cKDTree(self.samples)
+
+    def nearest(self, p_G: np.ndarray) -> int:
+        """Index of the interior sample nearest to ``p_G`` (3,)."""
+        return int(self.tree.query(p_G)[1])
+
+
+def _grid(lo: np.ndarray, hi: np.ndarray, total: int) -> np.ndarray:
+    """Regular grid (m, d) over the box [lo, hi] with about ``total`` points."""
+    d = len(lo)
+    n = max(2, int(round(total ** (1.0 / d))))
+    axes = [np.linspace(a, b, n) for a, b in zip(lo, hi)]
+    return np.array(list(itertools.product(*axes)), dtype=float)
+
+
+def _envelope(lo: np.ndarray, hi: np.ndarray, total: int) -> np.ndarray:
+    """Joint values with one joint at a limit, the others on a grid."""
+    d = len(lo)
+    if d == 1:
+        return np.array([[lo[0]], [hi[0]]])
+    per_face = max(4, total // (2 * d))
+    out = []
+    for j in range(d):
+        others = [i for i in range(d) if i != j]
+        g = _grid(lo[others], hi[others], per_face)
+        for limit in (lo[j], hi[j]):
+            q = np.empty((len(g), d))
+            q[:, others] = g
+            q[:, j] = limit
+            out.append(q)
+    return np.concatenate(out)
+
+
+def _palm_pairs(robot: Robot, hand: str, finger: int) -> pin.GeometryModel:
+    """Geometry model of the palm and one finger, with the finger-palm pairs that are not
+    adjacent (the finger's first link with geometry touches the palm by design)."""
+    h = robot.hands[hand]
+    model, src = robot.model, robot.collision_model
+    palm_joint = model.frames[h.grasp_frame].parentJoint
+    finger_joints = {model.getJointId(robot.joint_names[i]) for i in h.finger_idx[finger]}
+    with_geometry = {go.parentJoint for go in src.geometryObjects}
+    gm, palm, links = pin.GeometryModel(), [], []
+    for go in src.geometryObjects:
+        if go.parentJoint == palm_joint:
+            palm.append(gm.addGeometryObject(go.copy()))
+        elif go.parentJoint in finger_joints:
+            j = model.parents[go.parentJoint]
+            while j not in with_geometry and j != 0:
+                j = model.parents[j]
+            if j != palm_joint:  # not the phalanx mounted on the palm
+                links.append(gm.addGeometryObject(go.copy()))
+    for a in links:
+        for b in palm:
+            gm.addCollisionPair(pin.CollisionPair(a, b))
+    return gm
+
+
+def tip_positions(robot: Robot, hand: str, finger: int, Q: np.ndarray,
+                  with_collisions: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """Fingertip-sphere centres (m, 3) in the grasp frame G for finger joint values Q (m, n);
+    with ``with_collisions``, also whether the finger then collides with the palm (m,)."""
+    h = robot.hands[hand]
+    q = robot.q_rest.copy()
+    q[h.idx] = h.open
+    idx, tip = h.finger_idx[finger], h.tip_frames[finger]
+    model, data = robot.model, robot.model.createData()
+    gm = _palm_pairs(robot, hand, finger) if with_collisions else None
+    gd = gm.createData() if with_collisions else None
+    X_GW = inverse(robot.fk(q, h.grasp_frame))
+    out, hit = np.empty((len(Q), 3)), np.zeros(len(Q), dtype=bool)
+    for k, qf in enumerate(Q):
+        q[idx] = qf
+        if with_collisions:
+            hit[k] = pin.computeCollisions(model, data, gm, gd, robot.to_pin(q), True)
+        else:
+            pin.forwardKinematics(model, data, robot.to_pin(q))
+        out[k] = pin.updateFramePlacement(model, data, tip).translation
+    out = out @ X_GW[:3, :3].T + X_GW[:3, 3]
+    return (out, hit) if with_collisions else out
+
+
+def fit_spheres(W: np.ndarray, E: np.ndarray, k_max: int, r_min: float) -> tuple[np.ndarray, np.ndarray]:
+    """Algorithm 1: spheres inside the region of interior points W (m, 3) bounded by the
+    envelope points E (e, 3).  Returns centres (k, 3) and radii (k,), biggest first."""
+    d = cKDTree(E).query(W)[0]  # distance to the envelope
+    alive = np.ones(len(W), dtype=bool)
+    centres, radii = [], []
+    while len(centres) < k_max and alive.any():
+        i = int(np.argmax(np.where(alive, d, -np.inf)))
+        r = float(d[i])
+        if r < r_min:
+            break
+        c = W[i]
+        centres.append(c)
+        radii.append(r)
+        dist_c = np.linalg.norm(W - c, axis=1)
+        alive &= dist_c > r
+        np.minimum(d, dist_c - r, out=d)  # distance to the new sphere's surface
+    return np.array(centres).reshape(-1, 3), np.array(radii)
+
+
+def finger_workspace(robot: Robot, hand: str, finger: int, options: WorkspaceOptions) -> FingerWorkspace:
+    """Algorithm 1 for one finger.  A finger with more than three joints (a thumb with a
+    base joint) has a redundant chain whose "envelope" grid also covers its interior, so
+    its leading joints are fixed at a few values (limits and middle) and the spheres of
+    each fixed value are pooled, biggest first."""
+    h = robot.hands[hand]
+    idx = h.finger_idx[finger]
+    lo, hi = robot.lower[idx], robot.upper[idx]
+    n_base = max(0, len(idx) - 3)
+    bases = _grid(lo[:n_base], hi[:n_base], 3 ** n_base) if n_base else np.empty((1, 0))
+    centres, radii, W_all, Q_all, D_all = [], [], [], [], []
+    # closing: every joint moves away from its open value towards its far limit
+    # (flexions curl, a gripper jaw moves towards the other; abduction stays put)
+    open_ = robot.hands[hand].open[sum(len(i) for i in h.finger_idx[:finger]):][: len(idx)]
+    closing = np.sign((lo + hi) / 2 - open_) * (hi - lo > 0)
+    for b in bases:
+        Qw = _grid(lo[n_base:], hi[n_base:], options.interior_samples // len(bases))
+        Qe = _envelope(lo[n_base:], hi[n_base:], options.envelope_samples // len(bases))
+        Qw = np.hstack([np.tile(b, (len(Qw), 1)), Qw])
+        Qe = np.hstack([np.tile(b, (len(Qe), 1)), Qe])
+        W, hit = tip_positions(robot, hand, finger, Qw, with_collisions=True)
+        # configurations where the finger runs into the palm are outside the usable
+        # workspace: they join the envelope, so no sphere contains them
+        blocked = W[hit]
+        W, Qw = W[~hit], Qw[~hit]
+        step = 1e-4 * (hi - lo)
+        D = tip_positions(robot, hand, finger, np.clip(Qw + closing * step, lo, hi)) - W
+        D /= np.maximum(np.linalg.norm(D, axis=1, keepdims=True), 1e-12)
+        if len(idx) == 1:
+            # a 1-joint finger's workspace is a curve: no sphere fits inside it, so samples
+            # near the middle of its range, with radius r_min, stand for it
+            order = np.argsort(np.abs(Qw[:, 0] - (lo[0] + hi[0]) / 2))[: options.k_max]
+            c, r = W[order], np.full(len(order), options.r_min)
+        else:
+            E = np.concatenate([tip_positions(robot, hand, finger, Qe), blocked])
+            c, r = fit_spheres(W, E, options.k_max, options.r_min)
+        centres.append(c)
+        radii.append(r)
+        W_all.append(W)
+        Q_all.append(Qw)
+        D_all.append(D)
+    centres, radii = np.concatenate(centres), np.concatenate(radii)
+    order = np.argsort(-radii, kind="stable")[: options.k_max]
+    q = robot.q_rest.copy()
+    q[h.idx] = h.open
+    root_frame = robot.model.getFrameId(robot.joint_names[idx[0]], pin.FrameType.JOINT)
+    X_GW = inverse(robot.fk(q, h.grasp_frame))
+    p_root = X_GW[:3, :3] @ robot.fk(q, root_frame)[:3, 3] + X_GW[:3, 3]
+    return FingerWorkspace(centres[order], radii[order], np.concatenate(W_all), np.concatenate(Q_all),
+                           np.concatenate(D_all), p_root)
+
+
+def hand_workspace(robot: Robot, hand: str, options: WorkspaceOptions = WorkspaceOptions(),
+                   cache_dir: Path | None = None) -> tuple[FingerWorkspace, ...]:
+    """Workspaces of every finger of a hand, cached under ``cache_dir/workspace/``."""
+    inputs = {"urdf": robot.urdf_sha256, "robot_yaml": robot.robot_yaml_sha256,
+              "params": sha256_params({"hand": hand, **asdict(options)})}
+    expected = Provenance(FORMAT, FORMAT_VERSION, inputs)
+    path = None if cache_dir is None else Path(cache_dir) / "workspace" / f"{hand}-{inputs['params'][:12]}.h5"
+    if path is not None and path.is_file() and is_fresh(path, expected):
+        a = read_artefact(path, expected)
+        n = len(robot.hands[hand].spec.fingers)
+        return tuple(FingerWorkspace(*(a[f"finger{i}/{k}"] for k in ("centres", "radii", "samples", "sample_q", "sample_closing", "root")))
+                     for i in range(n))
+    fingers = tuple(finger_workspace(robot, hand, i, options) for i in range(len(robot.hands[hand].spec.fingers)))
+    if path is not None:
+        groups = {f"finger{i}": {k: getattr(f, k) for k in ("centres", "radii", "samples", "sample_q",
+                                                             "sample_closing", "root")}
+                  for i, f in enumerate(fingers)}
+        write_artefact(path, expected, {}, groups=groups)
+    return fingers

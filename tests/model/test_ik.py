@@ -1,0 +1,99 @@
+"""Tests of regrasp_cli.model.ik on the default robot: round trips FK(IK(T)) = T for
+reachable targets (FK of random configurations, collisions not checked), finger IK round
+trips, and failure on unreachable targets."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from regrasp_cli.model.ik import IKOptions, arm_ik, finger_ik
+from regrasp_cli.spatial import pose_error
+
+N_TARGETS = 12
+POS_TOL, ROT_TOL = 1e-3, 1e-2  # m, rad
+
+
+@pytest.mark.parametrize("hand", ["right", "left"])
+def test_arm_ik_round_trip(robot, hand):
+    h = robot.hands[hand]
+    targets_rng = np.random.default_rng(123 if hand == "right" else 456)
+    rng = np.random.default_rng(7)
+    others = np.setdiff1d(np.arange(robot.nq), h.arm_idx)
+    for k in range(N_TARGETS):
+        q_target = robot.sample(targets_rng, h.arm_idx)
+        X_WG = robot.fk(q_target, h.grasp_frame)
+        res = arm_ik(robot, hand, X_WG, robot.q_rest, rng)
+        assert res.success, f"target {k}: errors {res.position_error:.2g} m, {res.rotation_error:.2g} rad"
+        dp, dr = pose_error(robot.fk(res.q, h.grasp_frame), X_WG)
+        assert dp <= POS_TOL and dr <= ROT_TOL, (k, dp, dr)
+        assert res.position_error == pytest.approx(dp, abs=1e-9)
+        assert robot.within_limits(res.q)
+        np.testing.assert_array_equal(res.q[others], robot.q_rest[others])  # only the arm moved
+
+
+def test_arm_ik_with_torso_round_trip(robot):
+    h = robot.hands["right"]
+    idx = np.concatenate([robot.groups["torso"], h.arm_idx])
+    targets_rng, rng = np.random.default_rng(11), np.random.default_rng(12)
+    for k in range(N_TARGETS):
+        X_WG = robot.fk(robot.sample(targets_rng, idx), h.grasp_frame)
+        res = arm_ik(robot, "right", X_WG, robot.q_rest, rng, with_torso=True)
+        assert res.success, k
+        dp, dr = pose_error(robot.fk(res.q, h.grasp_frame), X_WG)
+        assert dp <= POS_TOL and dr <= ROT_TOL
+        assert robot.within_limits(res.q)
+        np.testing.assert_array_equal(res.q[robot.groups["left_arm"]], robot.q_rest[robot.groups["left_arm"]])
+
+
+def test_arm_ik_is_deterministic_for_a_seed(robot):
+    h = robot.hands["left"]
+    X_WG = robot.fk(robot.sample(np.random.default_rng(5), h.arm_idx), h.grasp_frame)
+    a = arm_ik(robot, "left", X_WG, robot.q_rest, np.random.default_rng(3))
+    b = arm_ik(robot, "left", X_WG, robot.q_rest, np.random.default_rng(3))
+    np.testing.assert_array_equal(a.q, b.q)
+    assert a.iterations == b.iterations
+
+
+@pytest.mark.parametrize("hand", ["right", "left"])
+def test_finger_ik_round_trip(robot, hand):
+    h = robot.hands[hand]
+    targets_rng, rng = np.random.default_rng(21), np.random.default_rng(22)
+    n = 0
+    for finger in range(len(h.finger_idx)):
+        idx = h.finger_idx[finger]
+        others = np.setdiff1d(np.arange(robot.nq), idx)
+        for k in range(3):
+            q_target = robot.sample(targets_rng, idx)
+            p = robot.fk(q_target, h.tip_frames[finger])[:3, 3]
+            res = finger_ik(robot, hand, finger, p, robot.q_rest, rng)
+            assert res.success, (finger, k, res.position_error)
+            err = np.linalg.norm(robot.fk(res.q, h.tip_frames[finger])[:3, 3] - p)
+            assert err <= POS_TOL
+            assert robot.within_limits(res.q)
+            np.testing.assert_array_equal(res.q[others], robot.q_rest[others])  # only that finger moved
+            n += 1
+    assert n >= 10
+
+
+def test_unreachable_arm_target(robot):
+    h = robot.hands["right"]
+    X = robot.fk(robot.q_rest, h.grasp_frame)
+    X[:3, 3] += [3.0, 0.0, 0.0]
+    res = arm_ik(robot, "right", X, robot.q_rest, np.random.default_rng(0))  # default: 20 restarts
+    assert not res.success
+    assert res.iterations == (IKOptions().restarts + 1) * IKOptions().max_iters
+    assert res.position_error > 2.0
+    assert robot.within_limits(res.q)
+    res = arm_ik(robot, "right", X, robot.q_rest, np.random.default_rng(0), with_torso=True,
+                 options=IKOptions(restarts=5))
+    assert not res.success
+
+
+def test_unreachable_finger_target(robot):
+    h = robot.hands["left"]
+    p = robot.fk(robot.q_rest, h.tip_frames[1])[:3, 3] + [0.0, 3.0, 0.0]
+    res = finger_ik(robot, "left", 1, p, robot.q_rest, np.random.default_rng(0))
+    assert not res.success
+    assert res.position_error > 2.5
+    assert robot.within_limits(res.q)
