@@ -71,13 +71,15 @@ def grasps() -> None:
 @click.option("--jobs", type=int, default=2, show_default=True, help="Parallel worker processes.")
 @click.option("--positions", type=int, default=None, help="Grasp-frame positions in the bounding box.")
 @click.option("--orientations", type=int, default=None, help="Grasp-frame orientations (SO(3) grid).")
+@click.option("--target", type=int, default=None,
+              help="Stop once this many distinct grasps are found (0: try every frame; default 150).")
 @click.pass_context
 def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, jobs: int,
-                 positions: int | None, orientations: int | None) -> None:
+                 positions: int | None, orientations: int | None, target: int | None) -> None:
     """Compute the grasp list of each hand and store it in the cache (HDF5)."""
     from regrasp_cli.report import run_grasps_build
 
-    run_grasps_build(scene, ctx.obj["cache_dir"], hand, seed, jobs, positions, orientations)
+    run_grasps_build(scene, ctx.obj["cache_dir"], hand, seed, jobs, positions, orientations, target)
 
 
 @grasps.command("show")

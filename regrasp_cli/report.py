@@ -123,21 +123,28 @@ def _positive(value, name: str) -> None:
         raise InputError(None, name, f"expected an integer >= 1, found {value}")
 
 
-def build_options(scene_seed: int, seed: int | None, jobs: int, positions: int | None, orientations: int | None):
+def build_options(scene_seed: int, seed: int | None, jobs: int, positions: int | None, orientations: int | None,
+                  target: int | None = None):
     from dataclasses import replace
 
     from regrasp_cli.grasp.build import BuildOptions
+
+    from regrasp_cli.errors import InputError
 
     for value, name in ((jobs, "--jobs"), (positions, "--positions"), (orientations, "--orientations")):
         _positive(value, name)
     options = BuildOptions(seed=scene_seed if seed is None else seed, jobs=jobs)
     g = options.grasp
-    g = replace(g, n_positions=positions or g.n_positions, n_orientations=orientations or g.n_orientations)
+    if target is not None and target < 0:
+        raise InputError(None, "--target", f"expected an integer >= 0, found {target}")
+    g = replace(g, n_positions=positions or g.n_positions, n_orientations=orientations or g.n_orientations,
+                target=g.target if target is None else target)
     return replace(options, grasp=g)
 
 
 def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, jobs: int,
-                     positions: int | None, orientations: int | None, console: Console | None = None) -> None:
+                     positions: int | None, orientations: int | None, target: int | None = None,
+                     console: Console | None = None) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from regrasp_cli.grasp.build import build_grasps
@@ -145,15 +152,19 @@ def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, 
 
     console = console or Console()
     spec = load_scene_spec(scene)
-    options = build_options(spec.planning.seed, seed, jobs, positions, orientations)
+    options = build_options(spec.planning.seed, seed, jobs, positions, orientations, target)
     hands = ["right", "left"] if hand == "both" else [hand]
     reports = []
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=console, transient=False) as bar:
         for h in hands:
             task = bar.add_task(f"{h} hand: grasp frames", total=None)
-            glist, rep = build_grasps(scene, cache_dir, h, options,
-                                      progress=lambda done, total, t=task: bar.update(t, completed=done, total=total))
+
+            def show(done, total, kept, t=task, h=h):
+                bar.update(t, completed=done, total=total,
+                           description=f"{h} hand: grasp frames ({kept} grasps)")
+
+            glist, rep = build_grasps(scene, cache_dir, h, options, progress=show)
             reports.append((glist, rep))
     t = Table(title=f"Grasp lists ({spec.object.mesh}, friction {spec.object.friction:g})")
     for c in ("hand", "frames tried", "palm in object", "enough contacts", "force closure", "kept (distinct)",

@@ -419,6 +419,8 @@ def main(argv=None) -> int:
     print("## World\n")
     print(f"- scene: {args.scene.relative_to(ROOT) if args.scene.is_relative_to(ROOT) else args.scene}"
           f" ({'object resting at its start pose' if n_obj else 'no object'})")
+    print(f"- robot: {problem.robot.spec.urdf.name} sha256 {problem.robot.urdf_sha256[:12]}, robot.yaml sha256 "
+          f"{problem.robot.robot_yaml_sha256[:12]}")
     print(f"- robot: {problem.robot.nq} joints; geometries: {gm.ngeoms} ({n_robot} robot, {n_obst} obstacles, "
           f"{n_obj} object; moving: {len(scene.moving)}); shapes: "
           + ", ".join(f"{v} {k}" for k, v in sorted(shapes.items())))

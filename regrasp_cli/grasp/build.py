@@ -35,6 +35,7 @@ from regrasp_cli.spatial import rotation_angle
 from regrasp_cli.store import Provenance, read_artefact, sha256_params, write_artefact
 
 FORMAT, FORMAT_VERSION = "regrasp.grasps", 1
+WAVE = 1024  # frames per wave between two checks of the target
 SCORE_NAMES = ("epsilon", "centroid", "ellipsoid", "curvature", "total")
 
 
@@ -133,6 +134,12 @@ def _run_chunk(scene: str, cache_dir: str, hand: str, options: BuildOptions, ind
 # ------------------------------------------------------------------ build
 
 
+def _frame_order(n_positions_grid: int, n_orientations: int) -> np.ndarray:
+    """Frame indices (position-major in :func:`grasp_frames`) in orientation-major order."""
+    n_pos = n_positions_grid
+    return (np.arange(n_orientations)[:, None] + np.arange(n_pos)[None, :] * n_orientations).ravel()
+
+
 def remove_duplicates(grasps: list[Grasp], distance: float, angle: float) -> list[Grasp]:
     """Best first; a grasp is dropped when a better kept one has its hand within
     ``distance`` (m) and ``angle`` (rad)."""
@@ -147,8 +154,8 @@ def remove_duplicates(grasps: list[Grasp], distance: float, angle: float) -> lis
 
 def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
                  progress=None) -> tuple[GraspList, BuildReport]:
-    """Compute and store the grasp list of ``hand``; ``progress(done, total)`` is called
-    as frames complete."""
+    """Compute and store the grasp list of ``hand``; ``progress(done, total, kept)`` is
+    called after each wave of frames."""
     from joblib import Parallel, delayed
 
     scene, cache_dir = Path(scene).resolve(), Path(cache_dir).resolve()
@@ -158,17 +165,29 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     t_prep = time.perf_counter() - t0
 
     n = len(frames)
-    n_chunks = max(1, min(n, 8 * max(1, options.jobs)))
-    chunks = np.array_split(np.arange(n), n_chunks)
     t1 = time.perf_counter()
-    results, done = [], 0
-    runner = Parallel(n_jobs=options.jobs, return_as="generator")
-    for chunk, res in zip(chunks, runner(delayed(_run_chunk)(str(scene), str(cache_dir), hand, options, c)
-                                         for c in chunks)):
-        results.append(res)
-        done += len(chunk)
+    results, kept, done = [], [], 0
+    # Frames go in waves of a fixed size, orientation-major (every position for the first
+    # orientations of the incremental SO(3) grid, then the next ones), so stopping at the
+    # target leaves a well-spread set and the result does not depend on the number of jobs.
+    # Forked workers inherit the context built above instead of rebuilding it (about 1 s
+    # per worker with loky).
+    order = _frame_order(n // options.grasp.n_orientations, options.grasp.n_orientations)
+    jobs = max(1, options.jobs)
+    backend = "multiprocessing" if jobs > 1 else "sequential"
+    for start in range(0, n, WAVE):
+        wave = order[start:start + WAVE]
+        chunks = [c for c in np.array_split(wave, jobs) if len(c)]
+        out = Parallel(n_jobs=jobs, backend=backend)(
+            delayed(_run_chunk)(str(scene), str(cache_dir), hand, options, c) for c in chunks)
+        results.extend(out)
+        done += len(wave)
+        kept = remove_duplicates([g for gs, _ in results for g in gs], options.grasp.duplicate_distance,
+                                 options.grasp.duplicate_angle)
         if progress:
-            progress(done, n)
+            progress(done, n, len(kept))
+        if options.grasp.target and len(kept) >= options.grasp.target:
+            break
     t_frames = time.perf_counter() - t1
 
     t2 = time.perf_counter()
@@ -177,14 +196,13 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     for _, st in results:
         for k, v in st.items():
             stats[k] = stats.get(k, 0) + v
-    kept = remove_duplicates(grasps, options.grasp.duplicate_distance, options.grasp.duplicate_angle)
     glist = _to_list(problem, hand, kept)
     path = artefact_path(cache_dir, problem, hand, options)
     write_grasp_list(path, provenance(problem, hand, options), glist, options)
     t_write = time.perf_counter() - t2
 
     tested = len(grasps) + stats.get("not_force_closure", 0)
-    report = BuildReport(hand, path, n, stats.get("palm", 0), tested + stats.get("hand_collision", 0),
+    report = BuildReport(hand, path, done, stats.get("palm", 0), tested + stats.get("hand_collision", 0),
                          len(grasps), len(kept),
                          {"surface + workspace + frames": t_prep, "grasp search (frames)": t_frames,
                           "duplicates + write": t_write})

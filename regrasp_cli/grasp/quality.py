@@ -232,6 +232,14 @@ def force_closure(wrenches, tol: float = FORCE_CLOSURE_TOL) -> tuple[bool, float
     s = np.linalg.svd(W - W.mean(axis=0), compute_uv=False)
     if s[-1] <= 1e-12 * max(s[0], 1.0):
         return False, 0.0
+    # Necessary conditions, ~20x cheaper than the 6-D hull: the origin must also be
+    # interior to the projections on the force and on the torque subspaces.
+    for part in (W[:, :3], W[:, 3:]):
+        try:
+            if not np.all(ConvexHull(part).equations[:, -1] < 0.0):
+                return False, 0.0
+        except QhullError:
+            return False, 0.0
     try:
         hull = ConvexHull(W)
     except QhullError:  # flat or otherwise degenerate set

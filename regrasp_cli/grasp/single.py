@@ -26,7 +26,7 @@ import pinocchio as pin
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights, force_ellipsoid_axis, grasp_quality
 from regrasp_cli.grasp.surface import Surface
 from regrasp_cli.grasp.workspace import FingerWorkspace
-from regrasp_cli.model.collision import eroded_geometry, mesh_geometry
+from regrasp_cli.model.collision import cold_start, eroded_geometry, mesh_geometry
 from regrasp_cli.model.robot import Robot
 from regrasp_cli.spatial import inverse
 
@@ -35,8 +35,9 @@ from regrasp_cli.spatial import inverse
 class GraspOptions:
     """Options of the single-grasp search (metres, radians)."""
 
-    n_positions: int = 27  # grasp-frame positions in the object's bounding box
-    n_orientations: int = 256  # grasp-frame orientations (incremental SO(3) grid)
+    n_positions: int = 64  # grasp-frame positions in the object's bounding box
+    n_orientations: int = 512  # grasp-frame orientations (incremental SO(3) grid)
+    target: int = 150  # stop once this many distinct grasps are found (0: try every frame)
     candidates_per_finger: int = 6  # contact candidates tried per finger before leaving it open
     contact_tolerance: float = 0.002  # fingertip-object penetration allowed, m
     ik_tolerance: float = 2e-4  # fingertip placement error accepted, m
@@ -112,6 +113,7 @@ class HandModel:
                 gm.addCollisionPair(pin.CollisionPair(a, b))
                 self.pair_fingers.append((fa, fb))
         self.gm, self.gd = gm, gm.createData()
+        cold_start(self.gd)
         for k, (fa, fb) in enumerate(self.pair_fingers):
             for f_ in {fa, fb} - {None}:
                 pairs_of[f_].append(k)
@@ -162,6 +164,35 @@ def _finger_ik(robot: Robot, data, q: np.ndarray, idx: np.ndarray, tip: int, p_W
     return False
 
 
+def _candidates(ws: FingerWorkspace, surface: Surface, X_OG: np.ndarray, r_tip: float,
+                opposing: np.ndarray | None, limit: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Contact candidates of one finger, best first: surface points (c, 3) and normals
+    (c, 3) in O, and the index of the nearest workspace sample of each (c,).
+
+    Candidates come from the workspace spheres biggest first (farthest from the joint
+    limits); within a sphere, the squarest pushes first (the fingertip's closing direction
+    against the outward normal) and, once other fingers touch, surfaces opposing theirs
+    (forces that cancel each other are what force closure needs).  A point whose normal
+    does not face the closing fingertip (cosine below 0.2) is no candidate.
+    """
+    R, t = X_OG[:3, :3], X_OG[:3, 3]
+    lists = surface.tree.query_ball_point(ws.centres @ R.T + t, ws.radii + r_tip)
+    sphere = np.concatenate([np.full(len(l), i) for i, l in enumerate(lists)]) if len(lists) else np.empty(0)
+    cand = np.concatenate([np.asarray(l, dtype=np.intp) for l in lists]) if len(lists) else np.empty(0, np.intp)
+    if cand.size == 0:
+        return np.empty((0, 3)), np.empty((0, 3)), np.empty(0, np.intp)
+    _, first = np.unique(cand, return_index=True)  # a point in several spheres: the biggest
+    first.sort()
+    cand, sphere = cand[first], sphere[first]
+    p, n = surface.points[cand], surface.normals[cand]
+    near = ws.tree.query((p + r_tip * n - t) @ R)[1]  # tip centres in G
+    facing = -np.einsum("ij,ij->i", n, ws.sample_closing[near] @ R.T)
+    rank = facing if opposing is None else facing - n @ opposing
+    keep = facing > 0.2
+    order = np.lexsort((-rank[keep], sphere[keep]))[:limit]
+    return p[keep][order], n[keep][order], near[keep][order]
+
+
 def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surface: Surface, X_OG: np.ndarray,
                     frame_index: int, friction: float, rho: float, options: GraspOptions) -> tuple[Grasp | None, dict]:
     """The grasp of one grasp frame, or None; plus counters for the summary."""
@@ -184,49 +215,28 @@ def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surf
     for f, ws in enumerate(workspaces):
         idx, tip = h.finger_idx[f], h.tip_frames[f]
         r_tip = h.spec.fingers[f].tip_radius
-        root_O = X_OG[:3, :3] @ ws.root + X_OG[:3, 3]
-        tried = 0
-        for c_G, r in zip(ws.centres, ws.radii):
-            c_O = X_OG[:3, :3] @ c_G + X_OG[:3, 3]
-            cand = surface.tree.query_ball_point(c_O, r + r_tip)
-            if not cand:
+        opposing = normals[in_contact].mean(axis=0) if placed else None
+        p, n, near = _candidates(ws, surface, X_OG, r_tip, opposing, options.candidates_per_finger)
+        stats["contacts"] += len(p)
+        for k in range(len(p)):
+            target_O = p[k] + r_tip * n[k]
+            qf = q.copy()
+            qf[idx] = ws.sample_q[near[k]]
+            p_W = X_WO[:3, :3] @ target_O + X_WO[:3, 3]
+            if not _finger_ik(robot, hm.data, qf, idx, tip, p_W, options.ik_iterations, options.ik_tolerance):
                 continue
-            cand = np.asarray(cand)
-            p, n = surface.points[cand], surface.normals[cand]
-            # the fingertip must push into the surface as the finger closes: the outward
-            # normal opposes the closing direction of the nearest workspace sample
-            tip_G = (p + r_tip * n) @ X_GO[:3, :3].T + X_GO[:3, 3]
-            near = ws.tree.query(tip_G)[1]
-            closing_O = ws.sample_closing[near] @ X_OG[:3, :3].T
-            facing = -np.einsum("ij,ij->i", n, closing_O)
-            keep = facing > 0.2
-            cand, p, n, facing, near = cand[keep], p[keep], n[keep], facing[keep], near[keep]
-            order = np.argsort(-facing, kind="stable")  # squarest pushes first
-            stats["contacts"] += len(order)
-            for k in order:
-                if tried >= options.candidates_per_finger:
-                    break
-                tried += 1
-                target_O = p[k] + r_tip * n[k]
-                qf = q.copy()
-                qf[idx] = ws.sample_q[near[k]]
-                p_W = X_WO[:3, :3] @ target_O + X_WO[:3, 3]
-                if not _finger_ik(robot, hm.data, qf, idx, tip, p_W, options.ik_iterations, options.ik_tolerance):
-                    continue
-                stats["ik"] += 1
-                if hm.collides(qf, placed, f):
-                    stats["collisions"] += 1
-                    continue
-                q = qf
-                placed.add(f)
-                in_contact[f] = True
-                points[f], normals[f] = p[k], n[k]
-                pin.computeJointJacobians(robot.model, hm.data, robot.to_pin(q))
-                J = pin.getFrameJacobian(robot.model, hm.data, tip, pin.LOCAL_WORLD_ALIGNED)[:3, robot._idx_q[idx]]
-                axes[f] = X_OG[:3, :3] @ (X_WG[:3, :3].T @ force_ellipsoid_axis(J))
-                break
-            if in_contact[f] or tried >= options.candidates_per_finger:
-                break
+            stats["ik"] += 1
+            if hm.collides(qf, placed, f):
+                stats["collisions"] += 1
+                continue
+            q = qf
+            placed.add(f)
+            in_contact[f] = True
+            points[f], normals[f] = p[k], n[k]
+            pin.computeJointJacobians(robot.model, hm.data, robot.to_pin(q))
+            J = pin.getFrameJacobian(robot.model, hm.data, tip, pin.LOCAL_WORLD_ALIGNED)[:3, robot._idx_q[idx]]
+            axes[f] = X_OG[:3, :3] @ (X_WG[:3, :3].T @ force_ellipsoid_axis(J))
+            break
         if f == 0 and not in_contact[0]:  # the thumb: no stable grasp without it (§IV-A-2)
             stats["few_contacts"] = 1
             return None, stats

@@ -2,7 +2,8 @@
 
 For each finger, the fingertip-sphere centre positions (in the hand's grasp frame G) are
 sampled on an *interior* grid W (every joint over its range) and an *envelope* grid E
-(one joint held at its lower, then upper limit, the others sampled).  Spheres are then
+(one joint held at its lower, then upper limit, the others sampled, the grid refined until
+neighbouring envelope points are at most ``envelope_spacing`` apart).  Spheres are then
 grown greedily: the interior point farthest from E and from the spheres found so far is
 the centre of the next sphere, whose radius is that distance; interior points inside it
 are removed; stop after ``k_max`` spheres or when the radius falls below ``r_min``.  The
@@ -24,17 +25,22 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial import cKDTree
 
+from regrasp_cli.model.collision import cold_start
 from regrasp_cli.model.robot import Robot
 from regrasp_cli.spatial import inverse
 from regrasp_cli.store import Provenance, is_fresh, read_artefact, sha256_params, write_artefact
 
-FORMAT, FORMAT_VERSION = "regrasp.workspace", 3
+FORMAT, FORMAT_VERSION = "regrasp.workspace", 4
 
 
 @dataclass(frozen=True)
 class WorkspaceOptions:
     interior_samples: int = 4096  # about this many W points per finger
-    envelope_samples: int = 4096  # about this many E points per finger
+    envelope_samples: int = 4096  # about this many E points per finger before refinement
+    # m: each envelope face grid is refined until neighbouring E points are at most this far
+    # apart, so that a sphere cannot reach out of the workspace between two E points by more
+    # than r - sqrt(r^2 - spacing^2 / 2) (a few tenths of a mm at r = r_min)
+    envelope_spacing: float = 0.002
     k_max: int = 30  # at most this many spheres per finger
     r_min: float = 0.004  # m, smallest sphere kept
 
@@ -69,21 +75,48 @@ def _grid(lo: np.ndarray, hi: np.ndarray, total: int) -> np.ndarray:
     return np.array(list(itertools.product(*axes)), dtype=float)
 
 
-def _envelope(lo: np.ndarray, hi: np.ndarray, total: int) -> np.ndarray:
-    """Joint values with one joint at a limit, the others on a grid."""
+def _grid_counts(lo: np.ndarray, hi: np.ndarray, counts) -> np.ndarray:
+    """Regular grid (prod(counts), d) over the box [lo, hi], ``counts[k]`` values on axis k."""
+    axes = [np.linspace(a, b, n) for a, b, n in zip(lo, hi, counts)]
+    return np.array(list(itertools.product(*axes)), dtype=float).reshape(-1, len(lo))
+
+
+def _envelope_positions(robot: Robot, hand: str, finger: int, base: np.ndarray, lo: np.ndarray,
+                        hi: np.ndarray, total: int, spacing: float, max_per_axis: int = 1000) -> np.ndarray:
+    """Fingertip positions (e, 3) in G on the envelope: one joint (after the fixed ``base``
+    ones) at a limit, the others on a grid of about ``total`` points in all, refined per
+    axis until neighbouring positions are at most ``spacing`` apart.
+
+    A joint-space grid alone leaves Cartesian gaps where a joint has a long lever (an
+    extended finger's proximal joint): Algorithm 1's radius, the distance to the nearest E
+    point, then overestimates the distance to the workspace boundary by up to half a gap,
+    and a sphere reaches out of the workspace (by 4 mm with the default robot's thumb)."""
     d = len(lo)
     if d == 1:
-        return np.array([[lo[0]], [hi[0]]])
+        return tip_positions(robot, hand, finger, np.column_stack([np.tile(base, (2, 1)), [lo[0], hi[0]]]))
     per_face = max(4, total // (2 * d))
+    n0 = max(2, int(round(per_face ** (1.0 / (d - 1)))))
     out = []
     for j in range(d):
         others = [i for i in range(d) if i != j]
-        g = _grid(lo[others], hi[others], per_face)
         for limit in (lo[j], hi[j]):
-            q = np.empty((len(g), d))
-            q[:, others] = g
-            q[:, j] = limit
-            out.append(q)
+            counts = [n0] * (d - 1)
+            for _ in range(4):  # the steps of a refined grid are measured again
+                g = _grid_counts(lo[others], hi[others], counts)
+                q = np.empty((len(g), d))
+                q[:, others] = g
+                q[:, j] = limit
+                P = tip_positions(robot, hand, finger, np.hstack([np.tile(base, (len(q), 1)), q]))
+                P3 = P.reshape(*counts, 3)
+                need = list(counts)
+                for a in range(d - 1):
+                    if counts[a] > 1 and hi[others[a]] > lo[others[a]]:
+                        step = float(np.linalg.norm(np.diff(P3, axis=a), axis=-1).max())
+                        need[a] = min(max_per_axis, max(counts[a], int(np.ceil((counts[a] - 1) * step / spacing)) + 1))
+                if need == counts:
+                    break
+                counts = need
+            out.append(P)
     return np.concatenate(out)
 
 
@@ -122,6 +155,8 @@ def tip_positions(robot: Robot, hand: str, finger: int, Q: np.ndarray,
     model, data = robot.model, robot.model.createData()
     gm = _palm_pairs(robot, hand, finger) if with_collisions else None
     gd = gm.createData() if with_collisions else None
+    if gd is not None:
+        cold_start(gd)
     X_GW = inverse(robot.fk(q, h.grasp_frame))
     out, hit = np.empty((len(Q), 3)), np.zeros(len(Q), dtype=bool)
     for k, qf in enumerate(Q):
@@ -172,9 +207,7 @@ def finger_workspace(robot: Robot, hand: str, finger: int, options: WorkspaceOpt
     closing = np.sign((lo + hi) / 2 - open_) * (hi - lo > 0)
     for b in bases:
         Qw = _grid(lo[n_base:], hi[n_base:], options.interior_samples // len(bases))
-        Qe = _envelope(lo[n_base:], hi[n_base:], options.envelope_samples // len(bases))
         Qw = np.hstack([np.tile(b, (len(Qw), 1)), Qw])
-        Qe = np.hstack([np.tile(b, (len(Qe), 1)), Qe])
         W, hit = tip_positions(robot, hand, finger, Qw, with_collisions=True)
         # configurations where the finger runs into the palm are outside the usable
         # workspace: they join the envelope, so no sphere contains them
@@ -189,7 +222,9 @@ def finger_workspace(robot: Robot, hand: str, finger: int, options: WorkspaceOpt
             order = np.argsort(np.abs(Qw[:, 0] - (lo[0] + hi[0]) / 2))[: options.k_max]
             c, r = W[order], np.full(len(order), options.r_min)
         else:
-            E = np.concatenate([tip_positions(robot, hand, finger, Qe), blocked])
+            E = np.concatenate([_envelope_positions(robot, hand, finger, b, lo[n_base:], hi[n_base:],
+                                                    options.envelope_samples // len(bases),
+                                                    options.envelope_spacing), blocked])
             c, r = fit_spheres(W, E, options.k_max, options.r_min)
         centres.append(c)
         radii.append(r)

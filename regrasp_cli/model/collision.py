@@ -85,6 +85,23 @@ def obstacle_geometry(ob: ObstacleSpec) -> coal.CollisionGeometry:
     return mesh_geometry(mesh.mesh)
 
 
+def cold_start(geometry_data: pin.GeometryData) -> None:
+    """Make coal's answers exact and independent of earlier queries.
+
+    No GJK warm start from the previous query: with pinocchio's cached guesses coal misses
+    about 1% of collisions (e.g. two deeply overlapping palm boxes).  Contacts enabled:
+    without them coal 3.0.3's early GJK exit missed 2 in 17,548 colliding configurations
+    (a palm box against a thumb cylinder, 10 mm deep); with them, none
+    (scripts/bench_collision.py, docs/BENCHMARKS.md)."""
+    for req in list(geometry_data.collisionRequests) + list(geometry_data.distanceRequests):
+        req.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
+        with warnings.catch_warnings():  # deprecated in coal, but pinocchio still sets it
+            warnings.simplefilter("ignore", DeprecationWarning)
+            req.enable_cached_gjk_guess = False
+    for req in geometry_data.collisionRequests:
+        req.enable_contact = True
+
+
 def eroded_geometry(geom: coal.CollisionGeometry, tol: float) -> coal.CollisionGeometry | None:
     """The primitive ``geom`` shrunk by ``tol`` (m) on every side, or None for other shapes."""
     tiny = 1e-6
@@ -157,15 +174,9 @@ class CollisionWorld:
                     margins.append(0.0)
         self.geometry_model = gm
         self.geometry_data = gm.createData()
+        cold_start(self.geometry_data)
         for k, m in enumerate(margins):
-            req = self.geometry_data.collisionRequests[k]
-            req.security_margin = m
-            # No GJK warm start from the previous query: with pinocchio's cached guesses coal
-            # misses about 1% of collisions (e.g. two deeply overlapping palm boxes).
-            req.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
-            with warnings.catch_warnings():  # deprecated in coal, but pinocchio still sets it
-                warnings.simplefilter("ignore", DeprecationWarning)
-                req.enable_cached_gjk_guess = False
+            self.geometry_data.collisionRequests[k].security_margin = m
         self.data = robot.model.createData()
         self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
             robot.model, self.geometry_model, self.geometry_data)

@@ -29,6 +29,7 @@ import numpy as np
 import pinocchio as pin
 
 from regrasp_cli.errors import InputError
+from regrasp_cli.model.collision import cold_start
 from regrasp_cli.model.robot import Robot
 from regrasp_cli.store import atomic_write_text, sha256_params
 
@@ -92,6 +93,7 @@ def compute_disabled_pairs(robot: Robot, samples: int, rng: np.random.Generator,
             same_chain.append(ja in ancestors[jb] or jb in ancestors[ja])
 
     gd, data = gm.createData(), robot.model.createData()
+    cold_start(gd)
     n_pairs = len(pair_links)
     closest = np.full(n_pairs, np.inf)
     always = np.ones(n_pairs, dtype=bool)
@@ -131,7 +133,7 @@ def disabled_pairs(robot: Robot, cache_dir: Path | None) -> DisabledPairs:
     opts = robot.spec.self_collision
     key = sha256_params({"urdf": robot.urdf_sha256, "robot_yaml": robot.robot_yaml_sha256,
                          "samples": opts.samples, "seed": opts.seed, "margin": opts.never_margin,
-                         "version": 2})[:20]
+                         "version": 3})[:20]
     path = None if cache_dir is None else Path(cache_dir) / "self_collision" / f"{key}.json"
     result = None
     if path is not None and path.is_file():
