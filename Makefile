@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 SCENE := configs/scenes/desk_handover.yaml
 
-.PHONY: demo test setup bench-collision clean
+.PHONY: demo test setup bench-collision bench-grasps clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -17,12 +17,16 @@ setup: $(BIN)/python
 
 demo: setup
 	$(BIN)/regrasp info $(SCENE)
+	$(BIN)/regrasp grasps build $(SCENE)
 
 test: setup
 	$(BIN)/python -m pytest
 
 bench-collision: setup
 	$(BIN)/python scripts/bench_collision.py
+
+bench-grasps: setup
+	$(BIN)/python scripts/bench_grasps.py
 
 clean:
 	rm -rf $(VENV) cache .pytest_cache

@@ -72,7 +72,7 @@ def grasps() -> None:
 @click.option("--positions", type=int, default=None, help="Grasp-frame positions in the bounding box.")
 @click.option("--orientations", type=int, default=None, help="Grasp-frame orientations (SO(3) grid).")
 @click.option("--target", type=int, default=None,
-              help="Stop once this many distinct grasps are found (0: try every frame; default 150).")
+              help="Stop once this many distinct grasps are found (0: try every frame; default 120).")
 @click.pass_context
 def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, jobs: int,
                  positions: int | None, orientations: int | None, target: int | None) -> None:

@@ -153,6 +153,7 @@ def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, 
     console = console or Console()
     spec = load_scene_spec(scene)
     options = build_options(spec.planning.seed, seed, jobs, positions, orientations, target)
+    load_problem(scene, cache_dir)  # every input error before the progress bars start
     hands = ["right", "left"] if hand == "both" else [hand]
     reports = []
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -189,17 +190,17 @@ def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, 
 
 
 def show_grasps(file: Path, best: int, scene: Path | None, cache_dir: Path, console: Console | None = None) -> None:
-    from regrasp_cli.grasp.build import BuildOptions, provenance, read_grasp_list
+    from regrasp_cli.grasp.build import provenance, read_grasp_list, stored_options
     from regrasp_cli.store import read_provenance
 
     console = console or Console()
     prov = read_provenance(file)
     expected = None
     if scene is not None:
+        # the list's own build options, with the scene's robot, object and friction: a list
+        # built with other options is not stale, one for another object or robot is
         problem = load_problem(scene, cache_dir)
-        hand = str(_hand_of(file))
-        expected = provenance(problem, hand, build_options(problem.spec.planning.seed, None, 1, None, None))
-        # options are part of the hashed parameters: a list built with other options is stale too
+        expected = provenance(problem, str(_hand_of(file)), stored_options(file))
     glist = read_grasp_list(file, expected)
     t = Table(title=f"{file}")
     t.add_column("provenance")

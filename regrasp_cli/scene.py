@@ -47,6 +47,14 @@ def load_problem(path: str | Path, cache_dir: Path | None) -> Problem:
     robot = load_robot(spec.robot)
     obj = load_object_mesh(spec.object.mesh, base_dir=spec.file.parent, scale=spec.object.scale,
                            file=str(spec.file), field="object.mesh")
+    ext = obj.extents
+    if not ext.min() > 1e-6 * ext.max():
+        # a flat object (a sheet, or a box with a zero side) has area but no volume: no
+        # mass centre, no inside, nothing for the fingers to close on
+        flat = "xyz"[int(np.argmin(ext))]
+        raise InputError(spec.file, "object.mesh",
+                         f"mesh {obj.name} has no thickness along {flat} (bounding box "
+                         f"{' x '.join(f'{e:g}' for e in ext)} m), so it has no volume to grasp")
     for i, ob in enumerate(spec.obstacles):  # fail here, naming the scene file and field
         if ob.shape == "mesh":
             load_object_mesh(str(ob.mesh), base_dir=ob.mesh.parent, scale=ob.size[0],

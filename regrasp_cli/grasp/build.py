@@ -25,14 +25,14 @@ import numpy as np
 
 from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.frames import grasp_frames
-from regrasp_cli.grasp.quality import GraspScores
+from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
 from regrasp_cli.grasp.workspace import WorkspaceOptions, hand_workspace
 from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.scene import Problem, load_problem
 from regrasp_cli.spatial import rotation_angle
-from regrasp_cli.store import Provenance, read_artefact, sha256_params, write_artefact
+from regrasp_cli.store import Provenance, canonical_json, read_artefact, sha256_params, write_artefact
 
 FORMAT, FORMAT_VERSION = "regrasp.grasps", 1
 WAVE = 1024  # frames per wave between two checks of the target
@@ -232,7 +232,23 @@ def write_grasp_list(path: Path, prov: Provenance, g: GraspList, options: BuildO
         "contact_points": g.points, "contact_normals": g.normals, "scores": g.scores,
         "frame_index": g.frame_index,
         "finger_names": np.array(g.finger_names), "score_names": np.array(SCORE_NAMES),
-    }, attrs={"hand": g.hand, "frames": options.grasp.n_positions * options.grasp.n_orientations})
+    }, attrs={"hand": g.hand, "options": canonical_json({k: v for k, v in asdict(options).items() if k != "jobs"})})
+
+
+def stored_options(path: Path) -> BuildOptions:
+    """The build options recorded in a grasp list (to check it against a scene)."""
+    import json
+
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            d = json.loads(f.attrs["options"])
+        g = dict(d["grasp"])
+        g["weights"] = QualityWeights(**g["weights"])
+        return BuildOptions(grasp=GraspOptions(**g), workspace=WorkspaceOptions(**d["workspace"]), seed=d["seed"])
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        raise InputError(path, "options", f"not a grasp list with readable build options ({exc})") from None
 
 
 def read_grasp_list(path: Path, expected: Provenance | None = None) -> GraspList:

@@ -53,6 +53,7 @@ import math
 from dataclasses import dataclass, fields
 
 import numpy as np
+from scipy.optimize import linprog
 from scipy.spatial import ConvexHull, QhullError
 
 #: Contact-patch radius (m) used for the default torsional friction of soft-finger
@@ -204,6 +205,21 @@ def primitive_wrenches(
 # ----------------------------------------------------------------------- force closure
 
 
+def _positive_null_combination(W: np.ndarray) -> bool:
+    """Is there lambda > 0 (every component) with sum 1 and W^T lambda = 0?  Then the origin
+    is in the relative interior of the hull of W.  LP: maximise s with lambda_i >= s."""
+    m = len(W)
+    c = np.zeros(m + 1)
+    c[-1] = -1.0
+    A_eq = np.zeros((7, m + 1))
+    A_eq[:6, :m] = W.T
+    A_eq[6, :m] = 1.0
+    A_ub = np.hstack([-np.eye(m), np.ones((m, 1))])
+    res = linprog(c, A_ub=A_ub, b_ub=np.zeros(m), A_eq=A_eq, b_eq=np.r_[np.zeros(6), 1.0],
+                  bounds=[(0, None)] * m + [(None, None)], method="highs")
+    return res.status == 0 and -res.fun > 1e-12
+
+
 def force_closure(wrenches, tol: float = FORCE_CLOSURE_TOL) -> tuple[bool, float]:
     """Exact force-closure test and Ferrari–Canny L1 epsilon quality.
 
@@ -232,14 +248,17 @@ def force_closure(wrenches, tol: float = FORCE_CLOSURE_TOL) -> tuple[bool, float
     s = np.linalg.svd(W - W.mean(axis=0), compute_uv=False)
     if s[-1] <= 1e-12 * max(s[0], 1.0):
         return False, 0.0
-    # Necessary conditions, ~20x cheaper than the 6-D hull: the origin must also be
-    # interior to the projections on the force and on the torque subspaces.
+    # Necessary conditions, much cheaper than the 6-D hull (about 1,000 facets for 32
+    # wrenches): the origin must be interior to the projections on the force and torque
+    # subspaces, and a strictly positive combination of the wrenches must vanish (LP).
     for part in (W[:, :3], W[:, 3:]):
         try:
             if not np.all(ConvexHull(part).equations[:, -1] < 0.0):
                 return False, 0.0
         except QhullError:
             return False, 0.0
+    if not _positive_null_combination(W):
+        return False, 0.0
     try:
         hull = ConvexHull(W)
     except QhullError:  # flat or otherwise degenerate set

@@ -35,9 +35,9 @@ from regrasp_cli.spatial import inverse
 class GraspOptions:
     """Options of the single-grasp search (metres, radians)."""
 
-    n_positions: int = 64  # grasp-frame positions in the object's bounding box
-    n_orientations: int = 512  # grasp-frame orientations (incremental SO(3) grid)
-    target: int = 150  # stop once this many distinct grasps are found (0: try every frame)
+    n_positions: int = 4  # grasp-frame positions in the object's bounding box
+    n_orientations: int = 4096  # grasp-frame orientations (incremental SO(3) grid)
+    target: int = 120  # stop once this many distinct grasps are found (0: try every frame)
     candidates_per_finger: int = 6  # contact candidates tried per finger before leaving it open
     contact_tolerance: float = 0.002  # fingertip-object penetration allowed, m
     ik_tolerance: float = 2e-4  # fingertip placement error accepted, m

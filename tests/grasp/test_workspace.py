@@ -1,0 +1,189 @@
+"""Finger workspaces approximated by spheres (Algorithm 1 of Saut et al. 2010, §IV-A-2):
+every sphere of every finger of the default right hand lies inside the finger's reachable
+workspace (checked by finger IK), spheres come biggest first and no smaller than r_min,
+fit_spheres on a case known on paper (a solid ball), and the HDF5 cache."""
+
+from __future__ import annotations
+
+from dataclasses import fields
+
+import numpy as np
+import pytest
+
+from regrasp_cli.grasp import workspace as ws_mod
+from regrasp_cli.grasp.workspace import WorkspaceOptions, fit_spheres, hand_workspace, tip_positions
+from regrasp_cli.model.ik import IKOptions, solve_position
+
+HAND = "right"
+OPTIONS = WorkspaceOptions()
+ARRAYS = ("centres", "radii", "samples", "sample_q", "sample_closing", "root")
+# the centre and the points at 0.9 r along +-x, +-y, +-z
+PROBES = np.vstack([np.zeros(3), 0.9 * np.eye(3), -0.9 * np.eye(3)])
+
+
+@pytest.fixture(scope="module")
+def ws_cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("ws_cache")
+
+
+@pytest.fixture(scope="module")
+def fingers(robot, ws_cache):
+    """The right hand's workspaces with the default options, computed once (and cached)."""
+    return hand_workspace(robot, HAND, OPTIONS, ws_cache)
+
+
+def _open_q(robot):
+    h = robot.hands[HAND]
+    q = robot.q_rest.copy()
+    q[h.idx] = h.open
+    return q
+
+
+# --------------------------------------------------------------------------- spheres
+
+
+def test_one_workspace_per_finger_with_consistent_shapes(robot, fingers):
+    h = robot.hands[HAND]
+    assert len(fingers) == len(h.spec.fingers) == 4
+    for f, w in enumerate(fingers):
+        k, m = len(w.radii), len(w.samples)
+        assert 1 <= k <= OPTIONS.k_max
+        assert w.centres.shape == (k, 3) and w.radii.shape == (k,)
+        assert w.samples.shape == (m, 3) and w.sample_q.shape == (m, len(h.finger_idx[f]))
+        assert w.sample_closing.shape == (m, 3) and w.root.shape == (3,)
+        assert np.all(np.isfinite(w.centres)) and np.all(np.isfinite(w.samples))
+        lo, hi = robot.lower[h.finger_idx[f]], robot.upper[h.finger_idx[f]]
+        # closing directions are unit vectors, except (zero) where the finger is fully
+        # closed: its flexion joints (the last two) at their limits cannot move further
+        norm = np.linalg.norm(w.sample_closing, axis=1)
+        zero = norm < 1e-9
+        np.testing.assert_allclose(norm[~zero], 1.0, atol=1e-9)
+        assert zero.mean() < 0.01
+        flex = w.sample_q[zero][:, -2:]
+        assert np.all(np.isclose(flex, lo[-2:]) | np.isclose(flex, hi[-2:]))
+        assert np.all(w.sample_q >= lo - 1e-12) and np.all(w.sample_q <= hi + 1e-12)
+
+
+def test_spheres_biggest_first_and_not_below_r_min(fingers):
+    for w in fingers:
+        assert np.all(np.diff(w.radii) <= 0.0), w.radii
+        assert np.all(w.radii >= OPTIONS.r_min)
+
+
+def test_sphere_centres_are_interior_samples(fingers):
+    """Algorithm 1 centres each sphere on a point of W (the interior grid)."""
+    for w in fingers:
+        d, _ = w.tree.query(w.centres)
+        assert np.all(d < 1e-12)
+
+
+def test_samples_are_the_fingertip_positions_of_their_joint_values(robot, fingers):
+    """The stored samples and their joint values agree (the joint values seed finger IK)."""
+    for f, w in enumerate(fingers):
+        pick = np.linspace(0, len(w.samples) - 1, 40).astype(int)
+        np.testing.assert_allclose(tip_positions(robot, HAND, f, w.sample_q[pick]), w.samples[pick], atol=1e-12)
+
+
+@pytest.mark.parametrize("finger", range(4))
+def test_every_sphere_lies_inside_the_reachable_workspace(robot, fingers, finger):
+    """The centre and the points at 0.9 r in 6 axis directions of every sphere are reached
+    by the fingertip centre (finger IK seeded from the nearest workspace sample)."""
+    h = robot.hands[HAND]
+    w = fingers[finger]
+    idx, tip = h.finger_idx[finger], h.tip_frames[finger]
+    q0 = _open_q(robot)
+    X_WG = robot.fk(q0, h.grasp_frame)
+    rng = np.random.default_rng(0)
+    misses = []
+    for i, (c, r) in enumerate(zip(w.centres, w.radii)):
+        for probe in PROBES:
+            p_G = c + r * probe
+            q = q0.copy()
+            q[idx] = w.sample_q[w.nearest(p_G)]
+            res = solve_position(robot, tip, X_WG[:3, :3] @ p_G + X_WG[:3, 3], q, idx, rng, IKOptions(restarts=5))
+            # the IK solution keeps the other joints and stays within the finger's limits
+            assert robot.within_limits(res.q)
+            np.testing.assert_array_equal(np.delete(res.q, idx), np.delete(q0, idx))
+            if res.position_error >= 1e-3:
+                misses.append((i, round(float(r), 4), probe.tolist(), round(res.position_error, 4)))
+    assert not misses, f"sphere points out of reach (sphere, radius, direction, error m): {misses}"
+
+
+# --------------------------------------------------------------------------- fit_spheres
+
+
+def _ball_case(radius=0.05, h=0.005, n_envelope=20000):
+    axis = np.arange(-radius, radius + h / 2, h)
+    g = np.array(np.meshgrid(axis, axis, axis, indexing="ij")).reshape(3, -1).T
+    W = g[np.linalg.norm(g, axis=1) < radius - 1e-12]
+    # Fibonacci points on the boundary sphere (spacing ~1.25 mm)
+    k = np.arange(n_envelope) + 0.5
+    z = 1.0 - 2.0 * k / n_envelope
+    phi = np.pi * (1.0 + 5**0.5) * k
+    s = np.sqrt(1.0 - z * z)
+    E = radius * np.column_stack([s * np.cos(phi), s * np.sin(phi), z])
+    return W, E, radius, h
+
+
+def test_fit_spheres_on_a_solid_ball():
+    W, E, R, h = _ball_case()
+    centres, radii = fit_spheres(W, E, k_max=12, r_min=0.004)
+    assert centres.shape == (len(radii), 3) and 1 <= len(radii) <= 12
+    # the first sphere is the ball itself, up to the grid spacing
+    assert np.linalg.norm(centres[0]) <= h
+    assert abs(radii[0] - R) <= h
+    # biggest first, none below r_min, all inside the ball (up to the envelope spacing)
+    assert np.all(np.diff(radii) <= 0) and np.all(radii >= 0.004)
+    assert np.all(np.linalg.norm(centres, axis=1) + radii <= R + 2e-3)
+    # later spheres are centred on interior points outside the earlier ones and do not
+    # overlap them (their radius is the distance to the earlier spheres' surfaces too)
+    for j in range(len(radii)):
+        assert np.min(np.linalg.norm(W - centres[j], axis=1)) < 1e-12
+        for i in range(j):
+            assert np.linalg.norm(centres[i] - centres[j]) >= radii[i] + radii[j] - 1e-12
+
+
+def test_fit_spheres_limits():
+    W, E, R, _ = _ball_case()
+    c, r = fit_spheres(W, E, k_max=1, r_min=0.001)
+    assert c.shape == (1, 3) and r.shape == (1,)
+    c, r = fit_spheres(W, E, k_max=10, r_min=R + 0.01)  # no sphere is that big
+    assert c.shape == (0, 3) and r.shape == (0,)
+    c, r = fit_spheres(W, E, k_max=0, r_min=0.001)
+    assert c.shape == (0, 3) and r.shape == (0,)
+
+
+# --------------------------------------------------------------------------- cache
+
+
+def test_hand_workspace_is_cached_in_hdf5(robot, fingers, ws_cache, monkeypatch):
+    files = sorted((ws_cache / "workspace").glob("*.h5"))
+    assert len(files) == 1 and files[0].name.startswith(f"{HAND}-")
+
+    def boom(*args, **kwargs):
+        raise AssertionError("finger_workspace recomputed despite a fresh cache")
+
+    monkeypatch.setattr(ws_mod, "finger_workspace", boom)
+    again = hand_workspace(robot, HAND, OPTIONS, ws_cache)
+    assert len(again) == len(fingers)
+    for a, b in zip(fingers, again):
+        for name in ARRAYS:
+            x, y = getattr(a, name), getattr(b, name)
+            assert x.shape == y.shape and x.dtype == y.dtype, name
+            assert np.array_equal(x, y), name
+
+
+def test_other_options_are_not_served_from_the_cache(robot, fingers, ws_cache, monkeypatch):
+    """The cache is keyed by the options: other options recompute (here: the patched
+    function is called) instead of returning the default-options file."""
+    calls = []
+
+    def spy(*args, **kwargs):
+        calls.append(args)
+        raise RuntimeError("recompute")
+
+    monkeypatch.setattr(ws_mod, "finger_workspace", spy)
+    with pytest.raises(RuntimeError, match="recompute"):
+        hand_workspace(robot, HAND, WorkspaceOptions(k_max=5), ws_cache)
+    assert calls
+    assert {f.name for f in fields(WorkspaceOptions)} >= {"interior_samples", "envelope_samples", "k_max", "r_min"}

@@ -1,0 +1,254 @@
+"""`regrasp grasps build` and `regrasp grasps show` (click.testing.CliRunner on
+regrasp_cli.cli.main): one small build end to end, show, help, a stale list refused, and
+bad input as exit code 2 with one `error:` line and no traceback."""
+
+from __future__ import annotations
+
+from importlib.metadata import version
+from pathlib import Path
+
+import click
+import numpy as np
+import pytest
+import trimesh
+import yaml
+from click.testing import CliRunner
+
+from regrasp_cli.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOT_YAML = ROOT / "configs" / "robots" / "humanoid43" / "robot.yaml"
+SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
+SMALL = ["--hand", "right", "--positions", "8", "--orientations", "64", "--target", "0", "--jobs", "1"]
+
+CLICK_MAJOR_MINOR = tuple(int(x) for x in version("click").split(".")[:2])
+pytestmark = pytest.mark.skipif(CLICK_MAJOR_MINOR < (8, 2), reason="needs click >= 8.2 (separate stderr)")
+
+
+def run(*args: str) -> "click.testing.Result":
+    # wide console: rich tables and paths are not wrapped
+    return CliRunner(env={"COLUMNS": "250"}).invoke(main, [str(a) for a in args])
+
+
+def scene_dict() -> dict:
+    d = yaml.safe_load(SCENE_YAML.read_text())
+    d["robot"] = str(ROBOT_YAML)
+    return d
+
+
+def write_scene(path: Path, d: dict) -> Path:
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    return path
+
+
+def assert_one_error_line(result, *words: str) -> str:
+    """Exit code 2, no traceback, exactly one `error:` line on stderr (other lines, if
+    any, are warnings) naming ``words``; returns the error line."""
+    assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
+    assert "Traceback" not in result.output and "Traceback" not in result.stderr
+    assert not isinstance(result.exception, Exception) or isinstance(result.exception, SystemExit)
+    lines = result.stderr.strip().splitlines()
+    errors = [ln for ln in lines if ln.startswith("error:")]
+    assert len(errors) == 1, result.stderr
+    assert all(ln.startswith(("error:", "warning:")) for ln in lines), result.stderr
+    for w in words:
+        assert w in errors[0], (w, errors[0])
+    return errors[0]
+
+
+@pytest.fixture(scope="module")
+def built(problem, cache_dir):
+    """One small `grasps build` into the session cache: (result, path of the list)."""
+    from regrasp_cli.grasp.build import artefact_path
+    from regrasp_cli.report import build_options
+
+    result = run("--cache-dir", cache_dir, "grasps", "build", SCENE_YAML, *SMALL)
+    path = artefact_path(Path(cache_dir).resolve(), problem, "right", build_options(0, None, 1, 8, 64, 0))
+    return result, path
+
+
+# --------------------------------------------------------------------------- build and show
+
+
+def test_build_prints_the_summary_and_writes_the_list(built, cache_dir):
+    result, path = built
+    assert result.exit_code == 0, (result.output, result.exception)
+    out = result.stdout
+    assert "Grasp lists" in out and "friction 0.5" in out and "builtin:statuette" in out
+    for column in ("frames tried", "force closure", "kept (distinct)", "best quality"):
+        assert column in out
+    assert "Time per stage" in out and "grasp search (frames)" in out
+    assert "left" not in out.split("Grasp lists")[1]  # --hand right: one row
+    assert path.is_file() and path.parent == Path(cache_dir).resolve() / "grasps"
+    assert f"right hand: {path}" in out
+    # the row of the summary: frames tried = positions grid x 64 orientations
+    row = next(ln for ln in out.splitlines() if ln.startswith("│") and ln.strip("│ ").startswith("right"))
+    cells = [c.strip() for c in row.strip("│┃ ").split("│")]
+    frames, kept = int(cells[1]), int(cells[5])
+    assert frames % 64 == 0 and frames >= 8 * 64
+    from regrasp_cli.grasp.build import read_grasp_list
+
+    assert kept == len(read_grasp_list(path))
+
+
+def test_show_prints_provenance_and_grasps(built):
+    _, path = built
+    result = run("grasps", "show", path)
+    assert result.exit_code == 0, (result.output, result.exception)
+    out = result.stdout
+    for word in ("provenance", "regrasp.grasps v1", "software", "created", "sha256 mesh", "sha256 params",
+                 "sha256 urdf", "sha256 robot_yaml", "hand", "right", "Best", "epsilon", "total", "thumb"):
+        assert word in out, word
+    from regrasp_cli.grasp.build import read_grasp_list
+
+    g = read_grasp_list(path)
+    rows = {cells[0]: cells[1] for cells in ([c.strip() for c in ln.strip("│").split("│")]
+                                            for ln in out.splitlines() if ln.startswith("│")) if len(cells) == 2}
+    assert rows["hand"] == "right" and rows["grasps"] == str(len(g))
+    assert rows["format"] == "regrasp.grasps v1"
+    # the best grasp's total is shown with 3 decimals
+    assert f"{g.scores[0, -1]:.3f}" in out
+
+
+def test_show_best_limits_the_rows(built):
+    _, path = built
+    result = run("grasps", "show", path, "--best", "1")
+    assert result.exit_code == 0
+    assert "Best 1 grasps" in result.stdout
+
+
+def test_show_refuses_a_list_stale_for_the_scene(built, tmp_path, cache_dir):
+    _, path = built
+    d = scene_dict()
+    d["object"]["friction"] = 0.3
+    other = write_scene(tmp_path / "other_friction.yaml", d)
+    result = run("--cache-dir", cache_dir, "grasps", "show", path, "--scene", other)
+    line = assert_one_error_line(result, str(path))
+    assert "params" in line and "rebuild" in line
+
+
+def test_show_accepts_the_list_for_its_own_scene_whatever_the_options(built, cache_dir):
+    """The list was built with small, non-default grids: it is still fresh for its scene."""
+    _, path = built
+    result = run("--cache-dir", cache_dir, "grasps", "show", path, "--scene", SCENE_YAML)
+    assert result.exit_code == 0, (result.output, result.exception)
+    assert "Best" in result.stdout
+
+
+def test_show_refuses_a_list_for_another_object(built, tmp_path, cache_dir):
+    _, path = built
+    d = scene_dict()
+    d["object"]["mesh"] = "builtin:mug"
+    other = write_scene(tmp_path / "mug.yaml", d)
+    result = run("--cache-dir", cache_dir, "grasps", "show", path, "--scene", other)
+    line = assert_one_error_line(result, str(path))
+    assert "mesh" in line
+
+
+def test_show_missing_file(tmp_path):
+    missing = tmp_path / "nope.h5"
+    assert_one_error_line(run("grasps", "show", missing), str(missing))
+
+
+def test_show_not_an_hdf5_file(tmp_path):
+    bad = tmp_path / "bad.h5"
+    bad.write_text("not hdf5")
+    assert_one_error_line(run("grasps", "show", bad), str(bad))
+
+
+# --------------------------------------------------------------------------- help
+
+
+def test_grasps_help():
+    result = run("grasps", "--help")
+    assert result.exit_code == 0
+    assert "build" in result.stdout and "show" in result.stdout
+
+
+def test_build_help():
+    result = run("grasps", "build", "--help")
+    assert result.exit_code == 0, result.output
+    for word in ("SCENE", "--hand", "right", "left", "both", "--seed", "--jobs", "--positions", "--orientations",
+                 "--target"):
+        assert word in result.stdout, word
+
+
+def test_show_help():
+    result = run("grasps", "show", "--help")
+    assert result.exit_code == 0, result.output
+    for word in ("FILE", "--best", "--scene"):
+        assert word in result.stdout, word
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def test_unknown_hand_is_a_usage_error():
+    result = run("grasps", "build", SCENE_YAML, "--hand", "middle")
+    assert result.exit_code == 2
+    assert "Traceback" not in result.output
+    assert "Invalid value for '--hand'" in result.stderr and "middle" in result.stderr
+
+
+def _degenerate_stl(tmp_path: Path) -> Path:
+    """Every triangle has three identical vertices: no area at all."""
+    v = np.repeat(np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.05], [0.05, 0.05, 0.1]]), 3, axis=0)
+    mesh = trimesh.Trimesh(v, np.arange(len(v)).reshape(-1, 3), process=False)
+    path = tmp_path / "degenerate.stl"
+    path.write_bytes(trimesh.exchange.stl.export_stl(mesh))
+    return path
+
+
+def _flat_box_stl(tmp_path: Path) -> Path:
+    path = tmp_path / "flat_box.stl"
+    trimesh.creation.box([0.1, 0.1, 0.0]).export(path)
+    return path
+
+
+def _scene_with(tmp_path: Path, **object_fields) -> Path:
+    d = scene_dict()
+    d["object"].update(object_fields)
+    return write_scene(tmp_path / "scene.yaml", d)
+
+
+@pytest.mark.parametrize("case, words", [
+    ("degenerate_mesh", ("scene.yaml", "object.mesh", "degenerate.stl")),
+    ("flat_box", ("scene.yaml", "object.mesh", "flat_box.stl", "volume")),
+    ("friction_0", ("scene.yaml", "object.friction")),
+    ("friction_negative", ("scene.yaml", "object.friction")),
+])
+def test_bad_scene(tmp_path, cache_dir, case, words):
+    if case == "degenerate_mesh":
+        scene = _scene_with(tmp_path, mesh=str(_degenerate_stl(tmp_path)))
+    elif case == "flat_box":
+        scene = _scene_with(tmp_path, mesh=str(_flat_box_stl(tmp_path)))
+    elif case == "friction_0":
+        scene = _scene_with(tmp_path, friction=0)
+    else:
+        scene = _scene_with(tmp_path, friction=-0.5)
+    result = run("--cache-dir", cache_dir, "grasps", "build", scene, *SMALL)
+    assert_one_error_line(result, *words)
+    assert not list((tmp_path).glob("**/*.h5"))
+
+
+def test_flat_box_is_refused_by_info_too(tmp_path, cache_dir):
+    """The check is on the scene's object, not on the grasp stage only."""
+    scene = _scene_with(tmp_path, mesh=str(_flat_box_stl(tmp_path)))
+    assert_one_error_line(run("--cache-dir", cache_dir, "info", scene), "object.mesh", "thickness")
+
+
+def test_flat_box_obstacle_mesh_is_still_allowed(tmp_path):
+    """Only the manipulated object needs a volume: a flat mesh obstacle loads."""
+    from regrasp_cli.model.objects import load_object_mesh
+
+    path = _flat_box_stl(tmp_path)
+    with pytest.warns(UserWarning):
+        obj = load_object_mesh(str(path), base_dir=tmp_path, field="obstacles[0].mesh.file")
+    assert obj.extents[2] == 0.0
+
+
+@pytest.mark.parametrize("option, value", [("--positions", "0"), ("--jobs", "0"), ("--orientations", "0"),
+                                           ("--positions", "-3"), ("--target", "-1")])
+def test_bad_numbers(cache_dir, option, value):
+    result = run("--cache-dir", cache_dir, "grasps", "build", SCENE_YAML, *SMALL, option, value)
+    assert_one_error_line(result, option)
