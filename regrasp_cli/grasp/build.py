@@ -15,6 +15,7 @@ is kept.  The result is deterministic for a given seed whatever the number of jo
 
 from __future__ import annotations
 
+import multiprocessing
 import re
 import time
 from dataclasses import asdict, dataclass, field
@@ -35,7 +36,7 @@ from regrasp_cli.spatial import rotation_angle
 from regrasp_cli.store import Provenance, canonical_json, read_artefact, sha256_params, write_artefact
 
 FORMAT, FORMAT_VERSION = "regrasp.grasps", 1
-WAVE = 1024  # frames per wave between two checks of the target
+CHUNK = 256  # frames per work item; the target is checked after each
 SCORE_NAMES = ("epsilon", "centroid", "ellipsoid", "curvature", "total")
 
 
@@ -113,9 +114,14 @@ def _context(scene: str, cache_dir: str, hand: str, options: BuildOptions):
     surface = build_surface(problem.object.mesh, sampling_step(tip_radius), np.random.default_rng(options.seed))
     ws = hand_workspace(robot, hand, options.workspace, Path(cache_dir))
     hm = HandModel(robot, hand, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance)
+    hm.voxels(ws)  # built here, so that forked workers inherit them
     rho = float(np.linalg.norm(problem.object.extents) / 2)
     frames = grasp_frames(problem.object.mesh.bounds, options.grasp.n_positions, options.grasp.n_orientations)
     return problem, surface, ws, hm, rho, frames
+
+
+def _run_chunk_star(args):
+    return _run_chunk(*args)
 
 
 def _run_chunk(scene: str, cache_dir: str, hand: str, options: BuildOptions, indices: np.ndarray):
@@ -167,27 +173,31 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     n = len(frames)
     t1 = time.perf_counter()
     results, kept, done = [], [], 0
-    # Frames go in waves of a fixed size, orientation-major (every position for the first
-    # orientations of the incremental SO(3) grid, then the next ones), so stopping at the
-    # target leaves a well-spread set and the result does not depend on the number of jobs.
-    # Forked workers inherit the context built above instead of rebuilding it (about 1 s
-    # per worker with loky).
+    # Frames go in fixed chunks, orientation-major (every position for the first
+    # orientations of the incremental SO(3) grid, then the next ones), and the results are
+    # consumed in order: stopping at the target after a chunk boundary leaves a well-spread
+    # set and the result does not depend on the number of jobs.  The workers are forked
+    # once, after the context above is built, so they inherit it instead of rebuilding it
+    # (about 1 s each); chunks still in flight when the target is reached are dropped.
     order = _frame_order(n // options.grasp.n_orientations, options.grasp.n_orientations)
+    chunks = [order[i:i + CHUNK] for i in range(0, n, CHUNK)]
+    args = [(str(scene), str(cache_dir), hand, options, c) for c in chunks]
     jobs = max(1, options.jobs)
-    backend = "multiprocessing" if jobs > 1 else "sequential"
-    for start in range(0, n, WAVE):
-        wave = order[start:start + WAVE]
-        chunks = [c for c in np.array_split(wave, jobs) if len(c)]
-        out = Parallel(n_jobs=jobs, backend=backend)(
-            delayed(_run_chunk)(str(scene), str(cache_dir), hand, options, c) for c in chunks)
-        results.extend(out)
-        done += len(wave)
-        kept = remove_duplicates([g for gs, _ in results for g in gs], options.grasp.duplicate_distance,
-                                 options.grasp.duplicate_angle)
-        if progress:
-            progress(done, n, len(kept))
-        if options.grasp.target and len(kept) >= options.grasp.target:
-            break
+    pool = multiprocessing.get_context("fork").Pool(jobs) if jobs > 1 else None
+    try:
+        outputs = pool.imap(_run_chunk_star, args) if pool else map(_run_chunk_star, args)
+        for chunk, out in zip(chunks, outputs):
+            results.append(out)
+            done += len(chunk)
+            kept = remove_duplicates([g for gs, _ in results for g in gs], options.grasp.duplicate_distance,
+                                     options.grasp.duplicate_angle)
+            if progress:
+                progress(done, n, len(kept))
+            if options.grasp.target and len(kept) >= options.grasp.target:
+                break
+    finally:
+        if pool:
+            pool.terminate()
     t_frames = time.perf_counter() - t1
 
     t2 = time.perf_counter()

@@ -67,6 +67,41 @@ class FingerWorkspace:
         return int(self.tree.query(p_G)[1])
 
 
+@dataclass(frozen=True)
+class SphereVoxels:
+    """A voxel map of a finger's spheres, each inflated by a radius: which sphere (index,
+    biggest first) holds a point, in constant time.  Exact up to half a voxel diagonal."""
+
+    origin: np.ndarray  # (3,) centre of voxel (0, 0, 0), frame G
+    resolution: float  # m
+    index: np.ndarray  # (nx, ny, nz) int16, -1 where no sphere
+
+    def lookup(self, p_G: np.ndarray) -> np.ndarray:
+        """Index of the biggest sphere holding each point (n, 3) in G, or -1 (n,)."""
+        ijk = np.rint((p_G - self.origin) / self.resolution).astype(np.intp)
+        shape = np.array(self.index.shape)
+        inside = np.all((ijk >= 0) & (ijk < shape), axis=1)
+        out = np.full(len(p_G), -1, dtype=np.intp)
+        i = ijk[inside]
+        out[inside] = self.index[i[:, 0], i[:, 1], i[:, 2]]
+        return out
+
+
+def sphere_voxels(ws: "FingerWorkspace", inflate: float, resolution: float = 0.002) -> SphereVoxels:
+    """The voxel map of ``ws``'s spheres grown by ``inflate`` (m)."""
+    if len(ws.radii) == 0:
+        return SphereVoxels(np.zeros(3), resolution, -np.ones((1, 1, 1), dtype=np.int16))
+    r = ws.radii + inflate
+    lo, hi = (ws.centres - r[:, None]).min(axis=0), (ws.centres + r[:, None]).max(axis=0)
+    shape = np.ceil((hi - lo) / resolution).astype(int) + 1
+    axes = [lo[d] + resolution * np.arange(shape[d]) for d in range(3)]
+    X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    index = np.full(tuple(shape), -1, dtype=np.int16)
+    for k in range(len(r) - 1, -1, -1):  # smallest first: the biggest sphere writes last
+        index[np.linalg.norm(X - ws.centres[k], axis=-1) <= r[k]] = k
+    return SphereVoxels(lo, resolution, index)
+
+
 def _grid(lo: np.ndarray, hi: np.ndarray, total: int) -> np.ndarray:
     """Regular grid (m, d) over the box [lo, hi] with about ``total`` points."""
     d = len(lo)
