@@ -3,7 +3,7 @@
 Pipeline: object surface model (:mod:`.surface`) -> finger workspace spheres
 (:mod:`.workspace`, Algorithm 1, cached) -> grasp frames (:mod:`.frames`: positions in
 the object's bounding box x an incremental SO(3) grid) -> one grasp attempt per frame
-(:mod:`.single`), in parallel with joblib -> force-closure filter and quality
+(:mod:`.single`), in parallel over forked processes -> force-closure filter and quality
 (:mod:`.quality`) -> near-duplicates removed -> sorted by quality -> HDF5 artefact.
 
 A grasp list depends only on the hand (URDF, robot.yaml), the object mesh, the friction
@@ -105,7 +105,7 @@ def artefact_path(cache_dir: Path, problem: Problem, hand: str, options: BuildOp
 
 @lru_cache(maxsize=4)
 def _context(scene: str, cache_dir: str, hand: str, options: BuildOptions):
-    """Everything a worker needs, built once per process (joblib reuses its workers)."""
+    """Everything a worker needs, built once in the parent and inherited by forked workers."""
     problem = load_problem(scene, Path(cache_dir))
     robot = problem.robot
     if hand not in robot.hands:
@@ -162,8 +162,6 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
                  progress=None) -> tuple[GraspList, BuildReport]:
     """Compute and store the grasp list of ``hand``; ``progress(done, total, kept)`` is
     called after each wave of frames."""
-    from joblib import Parallel, delayed
-
     scene, cache_dir = Path(scene).resolve(), Path(cache_dir).resolve()
     cache_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
