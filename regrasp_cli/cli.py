@@ -95,5 +95,36 @@ def grasps_show(ctx: click.Context, file: Path, best: int, scene: Path | None) -
     show_grasps(file, best, scene, ctx.obj["cache_dir"])
 
 
+@main.group()
+def roadmap() -> None:
+    """Offline roadmap: elementary Vis-PRM roadmaps composed into the Super Graph (§V-A)."""
+
+
+@roadmap.command("build")
+@click.argument("scene", type=click.Path(path_type=Path))
+@click.option("--nodes", type=int, default=50, show_default=True, help="Nodes of each elementary roadmap.")
+@click.option("--tree", is_flag=True, help="Super Graph edges only between different components (a forest).")
+@click.option("--seed", type=int, default=None, help="Random seed (default: the scene's planning.seed).")
+@click.option("--jobs", type=int, default=2, show_default=True, help="Parallel worker processes.")
+@click.pass_context
+def roadmap_build(ctx: click.Context, scene: Path, nodes: int, tree: bool, seed: int | None, jobs: int) -> None:
+    """Build the elementary roadmaps and the Super Graph; store them in the cache (HDF5)."""
+    from regrasp_cli.report import run_roadmap_build
+
+    run_roadmap_build(scene, ctx.obj["cache_dir"], nodes, tree, seed, jobs)
+
+
+@roadmap.command("show")
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option("--scene", type=click.Path(path_type=Path), default=None,
+              help="Check the file against this scene's robot and obstacles; refuse it if stale.")
+@click.pass_context
+def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
+    """Print the stored provenance and summary of a roadmap."""
+    from regrasp_cli.report import show_roadmap
+
+    show_roadmap(file, scene, ctx.obj["cache_dir"])
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

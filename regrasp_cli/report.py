@@ -228,3 +228,80 @@ def _hand_of(file: Path) -> str:
 
     with h5py.File(file, "r") as f:
         return f.attrs["hand"]
+
+
+def roadmap_options(scene_spec, nodes: int, tree: bool, seed: int | None):
+    from regrasp_cli.errors import InputError
+    from regrasp_cli.roadmap.build import RoadmapOptions
+
+    if nodes < 1:
+        raise InputError(None, "--nodes", f"expected an integer >= 1, found {nodes}")
+    return RoadmapOptions(nodes=nodes, tree=tree, seed=scene_spec.planning.seed if seed is None else seed)
+
+
+def run_roadmap_build(scene: Path, cache_dir: Path, nodes: int, tree: bool, seed: int | None, jobs: int,
+                      console: Console | None = None) -> None:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from regrasp_cli.config import load_scene_spec
+    from regrasp_cli.roadmap.build import build_roadmap
+
+    console = console or Console()
+    spec = load_scene_spec(scene)
+    options = roadmap_options(spec, nodes, tree, seed)
+    _positive(jobs, "--jobs")
+    load_problem(scene, cache_dir)  # every input error before the progress bars start
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=console) as bar:
+        tasks: dict[str, int] = {}
+
+        def show(stage: str, done: int, total: int) -> None:
+            if stage not in tasks:
+                tasks[stage] = bar.add_task(stage, total=total)
+            bar.update(tasks[stage], completed=done, total=total)
+
+        art, rep = build_roadmap(scene, cache_dir, options, jobs, progress=show)
+    t = Table(title=f"Roadmap ({'tree' if tree else 'graph'} mode, {nodes} nodes per elementary roadmap)")
+    t.add_column("what")
+    t.add_column("value")
+    for k, v in rep.rows.items():
+        t.add_row(k, v)
+    console.print(t)
+    t = Table(title="Time per stage (s)")
+    t.add_column("stage")
+    t.add_column("seconds", justify="right")
+    for k, v in rep.seconds.items():
+        t.add_row(k, f"{v:.2f}")
+    t.add_row("total", f"{sum(rep.seconds.values()):.2f}")
+    console.print(t)
+    console.print(f"roadmap: {rep.path}")
+
+
+def show_roadmap(file: Path, scene: Path | None, cache_dir: Path, console: Console | None = None) -> None:
+    import json
+
+    import h5py
+
+    from regrasp_cli.roadmap.build import RoadmapOptions, provenance, read_roadmap, summary
+    from regrasp_cli.store import read_provenance
+
+    console = console or Console()
+    prov = read_provenance(file)
+    expected = None
+    if scene is not None:
+        problem = load_problem(scene, cache_dir)
+        with h5py.File(file, "r") as f:
+            options = RoadmapOptions(**json.loads(f.attrs["options"]))
+        expected = provenance(problem, options)
+    art = read_roadmap(file, expected)
+    t = Table(title=f"{file}")
+    t.add_column("what")
+    t.add_column("value")
+    t.add_row("format", f"{prov.format} v{prov.format_version}")
+    t.add_row("software", prov.software_version)
+    t.add_row("created", prov.created)
+    for k, v in prov.inputs.items():
+        t.add_row(f"sha256 {k}", v[:16] + "…")
+    for k, v in summary(art).items():
+        t.add_row(k, v)
+    console.print(t)

@@ -15,7 +15,6 @@ is kept.  The result is deterministic for a given seed whatever the number of jo
 
 from __future__ import annotations
 
-import multiprocessing
 import re
 import time
 from dataclasses import asdict, dataclass, field
@@ -31,6 +30,7 @@ from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, grasp_for_f
 from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
 from regrasp_cli.grasp.workspace import WorkspaceOptions, hand_workspace
 from regrasp_cli.model.objects import mesh_sha256
+from regrasp_cli.parallel import ordered_map
 from regrasp_cli.scene import Problem, load_problem
 from regrasp_cli.spatial import rotation_angle
 from regrasp_cli.store import Provenance, canonical_json, read_artefact, sha256_params, write_artefact
@@ -180,22 +180,17 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     order = _frame_order(n // options.grasp.n_orientations, options.grasp.n_orientations)
     chunks = [order[i:i + CHUNK] for i in range(0, n, CHUNK)]
     args = [(str(scene), str(cache_dir), hand, options, c) for c in chunks]
-    jobs = max(1, options.jobs)
-    pool = multiprocessing.get_context("fork").Pool(jobs) if jobs > 1 else None
-    try:
-        outputs = pool.imap(_run_chunk_star, args) if pool else map(_run_chunk_star, args)
-        for chunk, out in zip(chunks, outputs):
-            results.append(out)
-            done += len(chunk)
-            kept = remove_duplicates([g for gs, _ in results for g in gs], options.grasp.duplicate_distance,
-                                     options.grasp.duplicate_angle)
-            if progress:
-                progress(done, n, len(kept))
-            if options.grasp.target and len(kept) >= options.grasp.target:
-                break
-    finally:
-        if pool:
-            pool.terminate()
+    outputs = ordered_map(_run_chunk_star, args, options.jobs)
+    for chunk, out in zip(chunks, outputs):
+        results.append(out)
+        done += len(chunk)
+        kept = remove_duplicates([g for gs, _ in results for g in gs], options.grasp.duplicate_distance,
+                                 options.grasp.duplicate_angle)
+        if progress:
+            progress(done, n, len(kept))
+        if options.grasp.target and len(kept) >= options.grasp.target:
+            break
+    outputs.close()  # stops the workers still busy with chunks we do not need
     t_frames = time.perf_counter() - t1
 
     t2 = time.perf_counter()

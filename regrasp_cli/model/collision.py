@@ -30,7 +30,7 @@ from __future__ import annotations
 import warnings
 from collections import deque
 from dataclasses import dataclass
-from typing import Iterable, Sequence
+from typing import Callable, Iterable, Sequence
 
 import coal
 import numpy as np
@@ -121,7 +121,13 @@ class CollisionWorld:
 
     def __init__(self, robot: Robot, obstacles: Sequence[ObstacleSpec] = (),
                  disabled_links: Iterable[tuple[str, str]] = (), obj: ObjectPlacement | None = None,
-                 options: CollisionOptions = CollisionOptions()):
+                 options: CollisionOptions = CollisionOptions(),
+                 pair_filter: Callable[[str, str], bool] | None = None,
+                 margin: Callable[[str, str], float] | None = None):
+        """``pair_filter(a, b)``, when given, keeps only the pairs it accepts; ``a`` and ``b``
+        are link names, ``"obstacle:NAME"`` or ``"object"`` (used by the roadmap to check only
+        what an elementary roadmap did not already check).  ``margin(a, b)`` (m, >= 0) is a
+        clearance the pair must keep (coal security margin), used by certified segment checks."""
         self.robot, self.obstacles, self.object, self.options = robot, tuple(obstacles), obj, options
         gm = robot.collision_model.copy()
         n_robot = gm.ngeoms
@@ -149,34 +155,41 @@ class CollisionWorld:
         disabled = {frozenset(p) for p in disabled_links}
         link = [robot.link_of_geometry(g) for g in range(n_robot)]
         root_fixed = [gm.geometryObjects[g].parentJoint == 0 for g in range(n_robot)]
-        margins: list[float] = []
+        keep = pair_filter or (lambda a, b: True)
+        obstacle_name = {o: gm.geometryObjects[o].name for o in self.obstacle_geoms}
+
+        def add(a: int, b: int, name_a: str, name_b: str) -> None:
+            if keep(name_a, name_b):
+                gm.addCollisionPair(pin.CollisionPair(a, b))
+
         for a in range(n_robot):
             for b in range(a + 1, n_robot):
                 if frozenset((link[a], link[b])) not in disabled and link[a] != link[b]:
-                    gm.addCollisionPair(pin.CollisionPair(a, b))
-                    margins.append(0.0)
+                    add(a, b, link[a], link[b])
         for a in range(n_robot):
             if root_fixed[a]:
                 continue
             for o in self.obstacle_geoms:
-                gm.addCollisionPair(pin.CollisionPair(a, o))
-                margins.append(0.0)
+                add(a, o, link[a], obstacle_name[o])
         if obj is not None:
             touching = set(obj.touching) | ({obj.attached_to} if obj.attached_to else set())
             tips = {robot.model.frames[f].name for h in touching for f in robot.hands[h].tip_frames}
             for a in range(n_robot):
-                g = self._eroded(gm, a, options.contact_tolerance) if link[a] in tips else a
-                gm.addCollisionPair(pin.CollisionPair(g, self.object_geom))
-                margins.append(0.0)
+                if keep(link[a], "object"):
+                    g = self._eroded(gm, a, options.contact_tolerance) if link[a] in tips else a
+                    gm.addCollisionPair(pin.CollisionPair(g, self.object_geom))
             if obj.attached_to is not None:
                 for o in self.obstacle_geoms:
-                    gm.addCollisionPair(pin.CollisionPair(self.object_geom, self._eroded(gm, o, options.support_tolerance)))
-                    margins.append(0.0)
+                    if keep("object", obstacle_name[o]):
+                        gm.addCollisionPair(pin.CollisionPair(self.object_geom,
+                                                              self._eroded(gm, o, options.support_tolerance)))
         self.geometry_model = gm
         self.geometry_data = gm.createData()
         cold_start(self.geometry_data)
-        for k, m in enumerate(margins):
-            self.geometry_data.collisionRequests[k].security_margin = m
+        if margin is not None:
+            for k, cp in enumerate(gm.collisionPairs):
+                m = margin(self.geometry_name(cp.first), self.geometry_name(cp.second))
+                self.geometry_data.collisionRequests[k].security_margin = m
         self.data = robot.model.createData()
         self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
             robot.model, self.geometry_model, self.geometry_data)
@@ -222,22 +235,22 @@ class CollisionWorld:
                 out.append((self.geometry_name(cp.first), self.geometry_name(cp.second)))
         return out
 
-    def segment_free(self, q0: np.ndarray, q1: np.ndarray, resolution: float) -> bool:
+    def segment_free(self, q0: np.ndarray, q1: np.ndarray, resolution: float, min_steps: int = 1) -> bool:
         """Straight segment q0 -> q1 in joint space, checked so that no joint moves more than
         ``resolution`` (rad or m) between two checked configurations.  The end points are
         checked too.  Samples are visited in bisection order (coarse to fine), so a
         colliding segment is usually rejected after few checks."""
-        for t in segment_samples(q0, q1, resolution):
+        for t in segment_samples(q0, q1, resolution, min_steps):
             if not self.is_free(q0 + t * (q1 - q0)):
                 return False
         return True
 
 
-def segment_samples(q0: np.ndarray, q1: np.ndarray, resolution: float) -> np.ndarray:
+def segment_samples(q0: np.ndarray, q1: np.ndarray, resolution: float, min_steps: int = 1) -> np.ndarray:
     """Interpolation parameters in [0, 1] (ends included) spaced so that no joint moves more
     than ``resolution`` between neighbours, ordered coarse to fine (ends, then midpoints
     breadth-first)."""
-    n = max(1, int(np.ceil(np.max(np.abs(q1 - q0)) / resolution)))
+    n = max(1, min_steps, int(np.ceil(np.max(np.abs(q1 - q0)) / resolution)))
     order, queue = [0, n], deque([(0, n)])
     while queue:
         a, b = queue.popleft()

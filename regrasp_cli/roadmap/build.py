@@ -1,0 +1,302 @@
+"""`regrasp roadmap build`: elementary Vis-PRM roadmaps and their Super Graph, cached in
+HDF5 (Saut et al. 2010, §V-A).
+
+Stages: the two elementary roadmaps (in parallel, one process each), the Super Graph
+nodes, then its edges (in parallel over forked workers, in a fixed order, so the result
+does not depend on the number of jobs).  The roadmap depends on the robot (URDF,
+robot.yaml), the static obstacles and the options, not on the object: its provenance
+hashes exactly those.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import networkx as nx
+import numpy as np
+
+from regrasp_cli.config import ObstacleSpec
+from regrasp_cli.errors import InputError
+from regrasp_cli.model.collision import CollisionWorld
+from regrasp_cli.parallel import ordered_map
+from regrasp_cli.roadmap.compose import (LEFT, RIGHT, SuperGraph, UnionFind, candidate_edges, compose_nodes,
+                                         edge_kind, involving, link_parts, margin_rule, mixed, part_filter,
+                                         subsystem)
+from regrasp_cli.roadmap.local import LocalPlanner, distance, joint_reach, joint_weights
+from regrasp_cli.roadmap.visprm import Roadmap, VisPRMOptions, visibility_prm
+from regrasp_cli.scene import Problem, load_problem
+from regrasp_cli.store import Provenance, canonical_json, read_artefact, read_provenance, sha256_file, \
+    sha256_params, write_artefact
+
+FORMAT, FORMAT_VERSION = "regrasp.roadmap", 1
+EDGE_CHUNK = 64
+
+
+@dataclass(frozen=True)
+class RoadmapOptions:
+    nodes: int = 50  # nodes of each elementary roadmap
+    max_failures: int = 2000  # Vis-PRM: consecutive dropped samples that end a roadmap early
+    tree: bool = False  # Super Graph edges only between different components
+    resolution: float = 0.05  # rad: largest joint step between two checked configurations
+    margin: float = 0.015  # m: clearance of the moving pairs; half the largest Cartesian step
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class RoadmapArtefact:
+    """What is stored: the elementary roadmaps (nodes over torso + arm joints, in group
+    order) and the Super Graph (full configurations)."""
+
+    right: Roadmap
+    left: Roadmap
+    graph: SuperGraph
+    joint_names: tuple[str, ...]
+    weights: np.ndarray  # (nq,) of the distance metric
+
+    def networkx(self) -> nx.Graph:
+        """The Super Graph as an undirected networkx graph, edge attribute ``length``."""
+        g = nx.Graph()
+        g.add_nodes_from(range(len(self.graph.nodes)))
+        g.add_weighted_edges_from(((int(a), int(b), float(w)) for (a, b), w in
+                                   zip(self.graph.edges, self.graph.lengths)), weight="length")
+        return g
+
+
+@dataclass(frozen=True)
+class BuildReport:
+    path: Path
+    rows: dict[str, str]  # summary table rows
+    seconds: dict[str, float]
+
+
+# ------------------------------------------------------------------ provenance
+
+
+def obstacles_sha256(obstacles: tuple[ObstacleSpec, ...]) -> str:
+    items = [{"name": o.name, "shape": o.shape, "size": list(o.size), "pose": np.round(o.X_WO, 12).tolist(),
+              "mesh": sha256_file(o.mesh) if o.mesh is not None else None} for o in obstacles]
+    return sha256_params(items)
+
+
+def provenance(problem: Problem, options: RoadmapOptions) -> Provenance:
+    r = problem.robot
+    return Provenance(FORMAT, FORMAT_VERSION, {
+        "urdf": r.urdf_sha256, "robot_yaml": r.robot_yaml_sha256,
+        "obstacles": obstacles_sha256(problem.spec.obstacles), "params": sha256_params(asdict(options))})
+
+
+def artefact_path(cache_dir: Path, problem: Problem, options: RoadmapOptions) -> Path:
+    key = sha256_params(dict(provenance(problem, options).inputs))[:12]
+    return Path(cache_dir) / "roadmap" / f"{problem.robot.model.name}-{key}.h5"
+
+
+# ------------------------------------------------------------------ worlds
+
+# Filled in the parent before workers are forked, so that they inherit the collision
+# worlds (which cannot be pickled); cleared when the build ends.
+_SHARED: dict = {}
+
+
+def _worlds(problem: Problem, options: RoadmapOptions) -> dict[str, CollisionWorld]:
+    parts = link_parts(problem.robot)
+    margin = margin_rule(problem.robot, options.margin)
+
+    def world(rule):
+        return CollisionWorld(problem.robot, problem.spec.obstacles, problem.disabled.links(),
+                              pair_filter=part_filter(parts, rule), margin=margin)
+
+    return {"right": world(subsystem(RIGHT)), "left": world(subsystem(LEFT)),
+            "node_right_torso": world(involving(LEFT)), "node_left_torso": world(involving(RIGHT)),
+            "mixed": world(mixed)}
+
+
+def q_base(problem: Problem) -> np.ndarray:
+    """Rest configuration with the hands open: the value of the joints no roadmap moves."""
+    q = problem.robot.q_rest.copy()
+    for h in problem.robot.hands.values():
+        q[h.idx] = h.open
+    return q
+
+
+def _elementary(side: str) -> tuple[Roadmap, int]:
+    problem, worlds, options = _SHARED["problem"], _SHARED["worlds"], _SHARED["options"]
+    robot = problem.robot
+    idx = np.concatenate([robot.groups["torso"], robot.groups[f"{side}_arm"]])
+    base, w = q_base(problem), _SHARED["weights"][idx]
+    world = worlds[side]
+    rng = np.random.default_rng([options.seed, 0 if side == "right" else 1])
+    lo, hi = robot.lower[idx], robot.upper[idx]
+
+    def full(x):
+        q = base.copy()
+        q[idx] = x
+        return q
+
+    roadmap = visibility_prm(
+        sample=lambda: rng.uniform(lo, hi),
+        is_free=lambda x: world.is_free(full(x)),
+        segment_free=lambda x0, x1: _SHARED["planner"].segment_free(world, full(x0), full(x1)),
+        distance=lambda x0, xs: distance(x0, xs, w),
+        options=VisPRMOptions(max_nodes=options.nodes, max_failures=options.max_failures))
+    return roadmap, world.n_checks
+
+
+def _check_edges(chunk: np.ndarray) -> tuple[np.ndarray, int]:
+    """Validity (c,) of candidate Super Graph edges (c, 2), and the checks made."""
+    worlds, nodes, source = _SHARED["worlds"], _SHARED["nodes"], _SHARED["source"]
+    planner = _SHARED["planner"]
+    by_kind = (worlds["node_right_torso"], worlds["node_left_torso"], worlds["mixed"])
+    before = sum(w.n_checks for w in by_kind)
+    ok = np.array([planner.segment_free(by_kind[edge_kind(source, a, b)], nodes[a], nodes[b]) for a, b in chunk],
+                  dtype=bool)
+    return ok, sum(w.n_checks for w in by_kind) - before
+
+
+# ------------------------------------------------------------------ build
+
+
+def build_roadmap(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: int = 2,
+                  progress: Callable[[str, int, int], None] | None = None) -> tuple[RoadmapArtefact, BuildReport]:
+    """Build, store and return the roadmap; ``progress(stage, done, total)``."""
+    if options.nodes <= 0:
+        raise InputError(None, "--nodes", f"expected an integer >= 1, found {options.nodes}")
+    if jobs <= 0:
+        raise InputError(None, "--jobs", f"expected an integer >= 1, found {jobs}")
+    problem = load_problem(scene, cache_dir)
+    robot = problem.robot
+    for side in ("right", "left"):
+        if len(robot.groups[f"{side}_arm"]) == 0:
+            raise InputError(robot.spec.file, f"groups.{side}_arm", "expected at least one joint")
+    seconds: dict[str, float] = {}
+    t0 = time.perf_counter()
+    worlds = _worlds(problem, options)
+    weights = joint_weights(robot)
+    planner = LocalPlanner(options.resolution, options.margin, joint_reach(robot))
+    _SHARED.update(problem=problem, worlds=worlds, options=options, weights=weights, planner=planner)
+    checks = 0
+    try:
+        if progress:
+            progress("elementary roadmaps", 0, 2)
+        (right, cr), (left, cl) = list(ordered_map(_elementary, ["right", "left"], min(jobs, 2)))
+        checks += cr + cl
+        seconds["elementary roadmaps"] = time.perf_counter() - t0
+        if progress:
+            progress("elementary roadmaps", 2, 2)
+
+        t1 = time.perf_counter()
+        nt = len(robot.groups["torso"])
+        base = q_base(problem)
+        before = worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks
+        nodes, source, tested_nodes = compose_nodes(robot, base, right.nodes, left.nodes,
+                                                    worlds["node_right_torso"].is_free,
+                                                    worlds["node_left_torso"].is_free)
+        checks += worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks - before
+        seconds["Super Graph nodes"] = time.perf_counter() - t1
+        del nt
+
+        t2 = time.perf_counter()
+        cand = candidate_edges(source, right.neighbours(), left.neighbours())
+        _SHARED.update(nodes=nodes, source=source)
+        valid = np.zeros(len(cand), dtype=bool)
+        if options.tree:
+            uf, by_kind = UnionFind(len(nodes)), (worlds["node_right_torso"], worlds["node_left_torso"], worlds["mixed"])
+            before = sum(w.n_checks for w in by_kind)
+            for k, (a, b) in enumerate(cand):
+                if uf.find(int(a)) != uf.find(int(b)) and \
+                        planner.segment_free(by_kind[edge_kind(source, a, b)], nodes[a], nodes[b]):
+                    uf.union(int(a), int(b))
+                    valid[k] = True
+                if progress and k % 256 == 0:
+                    progress("Super Graph edges", k, len(cand))
+            checks += sum(w.n_checks for w in by_kind) - before
+        else:
+            chunks = [cand[i:i + EDGE_CHUNK] for i in range(0, len(cand), EDGE_CHUNK)]
+            done = 0
+            for k, (ok, n) in enumerate(ordered_map(_check_edges, chunks, jobs)):
+                valid[k * EDGE_CHUNK:k * EDGE_CHUNK + len(ok)] = ok
+                checks += n
+                done += len(ok)
+                if progress:
+                    progress("Super Graph edges", done, len(cand))
+        if progress:
+            progress("Super Graph edges", len(cand), len(cand))
+        edges = cand[valid]
+        lengths = distance(nodes[edges[:, 0]], nodes[edges[:, 1]], weights) if len(edges) else np.zeros(0)
+        graph = SuperGraph(nodes, source, edges, np.asarray(lengths, dtype=float), tested_nodes, len(cand))
+        seconds["Super Graph edges"] = time.perf_counter() - t2
+    finally:
+        _SHARED.clear()
+
+    art = RoadmapArtefact(right, left, graph, robot.joint_names, weights)
+    t3 = time.perf_counter()
+    path = artefact_path(cache_dir, problem, options)
+    write_roadmap(path, provenance(problem, options), art, options)
+    seconds["write"] = time.perf_counter() - t3
+    rows = summary(art)
+    rows["collision checks"] = f"{checks:,}"
+    total = sum(seconds.values())
+    rows["collision checks / s"] = f"{checks / max(total, 1e-9):,.0f}"
+    return art, BuildReport(path, rows, seconds)
+
+
+def summary(art: RoadmapArtefact) -> dict[str, str]:
+    def comps(rm: Roadmap) -> int:
+        g = nx.Graph()
+        g.add_nodes_from(range(len(rm.nodes)))
+        g.add_edges_from(map(tuple, rm.edges))
+        return nx.number_connected_components(g)
+
+    g = art.networkx()
+    rows = {}
+    for name, rm in (("R_r (torso + right arm)", art.right), ("R_l (torso + left arm)", art.left)):
+        rows[name] = (f"{len(rm.nodes)} nodes ({int(rm.guard.sum())} guards), {len(rm.edges)} edges, "
+                      f"{comps(rm)} components, {rm.samples} samples")
+    sg = art.graph
+    rows["Super Graph"] = (f"{len(sg.nodes)} nodes (of {sg.candidates_nodes} candidates), {len(sg.edges)} edges "
+                           f"(of {sg.candidates_edges} candidates), {nx.number_connected_components(g)} components")
+    return rows
+
+
+# ------------------------------------------------------------------ storage
+
+
+def write_roadmap(path: Path, prov: Provenance, art: RoadmapArtefact, options: RoadmapOptions) -> None:
+    groups = {}
+    for side, rm in (("right", art.right), ("left", art.left)):
+        groups[side] = {"nodes": rm.nodes, "edges": rm.edges, "lengths": rm.lengths, "guard": rm.guard}
+    sg = art.graph
+    groups["super_graph"] = {"nodes": sg.nodes, "source": sg.source, "edges": sg.edges, "lengths": sg.lengths}
+    write_artefact(path, prov, {"joint_names": np.array(art.joint_names), "weights": art.weights},
+                   attrs={"options": canonical_json(asdict(options)),
+                          "samples_right": art.right.samples, "samples_left": art.left.samples,
+                          "candidate_nodes": sg.candidates_nodes, "candidate_edges": sg.candidates_edges},
+                   groups=groups)
+
+
+def read_roadmap(path: Path, expected: Provenance | None = None) -> RoadmapArtefact:
+    """Load a roadmap; with ``expected``, refuse it when the robot, obstacles or options changed."""
+    a = read_artefact(path, expected or read_provenance(path), rebuild="regrasp roadmap build")
+    rms = {side: Roadmap(a[f"{side}/nodes"], a[f"{side}/edges"], a[f"{side}/lengths"], a[f"{side}/guard"].astype(bool),
+                         int(a.attrs[f"samples_{side}"])) for side in ("right", "left")}
+    sg = SuperGraph(a["super_graph/nodes"], a["super_graph/source"], a["super_graph/edges"], a["super_graph/lengths"],
+                    int(a.attrs["candidate_nodes"]), int(a.attrs["candidate_edges"]))
+    names = tuple(str(s) for s in a["joint_names"])
+    return RoadmapArtefact(rms["right"], rms["left"], sg, names, a["weights"])
+
+
+def load_or_build(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: int = 2,
+                  build: bool = True) -> RoadmapArtefact:
+    """The cached roadmap if fresh; else a new one (or, with ``build=False``, a refusal)."""
+    from regrasp_cli.store import is_fresh
+
+    problem = load_problem(scene, cache_dir)
+    prov = provenance(problem, options)
+    path = artefact_path(cache_dir, problem, options)
+    if path.is_file() and is_fresh(path, prov):
+        return read_roadmap(path, prov)
+    if not build:
+        return read_roadmap(path, prov)  # raises: missing or stale, naming what differs
+    return build_roadmap(scene, cache_dir, options, jobs)[0]

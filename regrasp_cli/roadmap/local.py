@@ -1,0 +1,94 @@
+"""Local planner and distance metric of the roadmaps (Saut et al. 2010, §V-A).
+
+The local path between two configurations is the straight segment in joint space.  It is
+checked at configurations spaced by at most ``resolution`` (rad or m, the largest change
+of any joint between two checked configurations) *and* by at most ``2 * margin`` of
+Cartesian displacement of any point of the robot, with every pair whose relative pose
+changes along the segment kept ``margin`` apart (a coal security margin).  Every point of
+the path is then within ``margin`` of a checked configuration, so the whole segment is
+collision-free, not only the samples: a check at any finer resolution agrees.  (A plain
+joint-step check at 0.03 rad let 1.3 % of the Super Graph edges through that a check at
+0.015 rad found colliding.)  The displacement bound is ``sum_j reach_j |dq_j|``, with
+``reach_j`` an upper bound of the distance from joint j to any point it carries (the sum
+of the link offsets on the way plus the geometry's bounding radius), 1 for prismatic
+joints.  Checks run coarse to fine with early exit (:meth:`CollisionWorld.segment_free`).
+
+The distance is a weighted Euclidean norm over the joints.  A joint's weight is the reach
+of the chain it moves: the largest distance, at the rest configuration, from its axis to
+the origin of any link it carries, so a radian of torso yaw (which swings both arms) costs
+more than a radian of wrist roll.  Weights are divided by the largest one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from regrasp_cli.model.robot import Robot
+
+
+def joint_weights(robot: Robot, q_ref: np.ndarray | None = None, floor: float = 0.05) -> np.ndarray:
+    """Weights (nq,) in [floor, 1] for :func:`distance` (see the module docstring)."""
+    model, data = robot.model, robot.model.createData()
+    pin.forwardKinematics(model, data, robot.to_pin(robot.q_rest if q_ref is None else q_ref))
+    pin.updateFramePlacements(model, data)
+    w = np.empty(robot.nq)
+    for i, name in enumerate(robot.joint_names):
+        j = model.getJointId(name)
+        axis_point = data.oMi[j].translation
+        subtree = set(model.subtrees[j])
+        reach = 0.0
+        for f, frame in enumerate(model.frames):
+            if frame.parentJoint in subtree:
+                reach = max(reach, float(np.linalg.norm(data.oMf[f].translation - axis_point)))
+        w[i] = reach
+    w /= max(float(w.max()), 1e-12)
+    return np.maximum(w, floor)
+
+
+def joint_reach(robot: Robot) -> np.ndarray:
+    """Upper bound (nq,), metres per radian (1 for prismatic joints), of how far a point
+    carried by each joint moves per unit of that joint, whatever the configuration."""
+    model, geoms = robot.model, robot.collision_model.geometryObjects
+    reach = np.zeros(robot.nq)
+    for i, name in enumerate(robot.joint_names):
+        j = model.getJointId(name)
+        if model.joints[j].shortname().startswith("JointModelP"):
+            reach[i] = 1.0
+            continue
+        for go in geoms:
+            if go.parentJoint not in model.subtrees[j]:
+                continue
+            length, k = 0.0, go.parentJoint
+            while k != j:  # offsets of the joints between j and the geometry's joint
+                length += float(np.linalg.norm(model.jointPlacements[k].translation))
+                k = model.parents[k]
+            go.geometry.computeLocalAABB()
+            length += float(np.linalg.norm(go.placement.translation)) + float(go.geometry.aabb_radius)
+            reach[i] = max(reach[i], length)
+    return reach
+
+
+@dataclass(frozen=True)
+class LocalPlanner:
+    """Certified straight-line local planner (see the module docstring)."""
+
+    resolution: float  # rad (or m): largest joint step between two checked configurations
+    margin: float  # m: clearance kept by every pair that moves; half the Cartesian step
+    reach: np.ndarray  # (nq,) from :func:`joint_reach`
+
+    def steps(self, q0: np.ndarray, q1: np.ndarray) -> int:
+        """Number of intervals the segment is cut into."""
+        d = np.abs(q1 - q0)
+        return max(1, int(np.ceil(d.max() / self.resolution)), int(np.ceil(d @ self.reach / (2 * self.margin))))
+
+    def segment_free(self, world, q0: np.ndarray, q1: np.ndarray) -> bool:
+        return world.segment_free(q0, q1, self.resolution, self.steps(q0, q1))
+
+
+def distance(q0: np.ndarray, q1: np.ndarray, weights: np.ndarray) -> float | np.ndarray:
+    """Weighted joint-space distance; ``q1`` may be a stack (n, nq) of configurations."""
+    d = np.asarray(q1) - q0
+    return np.sqrt(np.sum(weights * d * d, axis=-1))
