@@ -123,13 +123,21 @@ class CollisionWorld:
                  disabled_links: Iterable[tuple[str, str]] = (), obj: ObjectPlacement | None = None,
                  options: CollisionOptions = CollisionOptions(),
                  pair_filter: Callable[[str, str], bool] | None = None,
-                 margin: Callable[[str, str], float] | None = None):
+                 margin: Callable[[str, str], float] | None = None,
+                 links: Callable[[str], bool] | None = None):
         """``pair_filter(a, b)``, when given, keeps only the pairs it accepts; ``a`` and ``b``
         are link names, ``"obstacle:NAME"`` or ``"object"`` (used by the roadmap to check only
         what an elementary roadmap did not already check).  ``margin(a, b)`` (m, >= 0) is a
-        clearance the pair must keep (coal security margin), used by certified segment checks."""
+        clearance the pair must keep (coal security margin), used by certified segment checks.
+        ``links(name)``, when given, leaves out the robot links it rejects altogether."""
         self.robot, self.obstacles, self.object, self.options = robot, tuple(obstacles), obj, options
-        gm = robot.collision_model.copy()
+        if links is None:
+            gm = robot.collision_model.copy()
+        else:  # only the robot geometries of the given links: a smaller broadphase
+            gm = pin.GeometryModel()
+            for g, go in enumerate(robot.collision_model.geometryObjects):
+                if links(robot.link_of_geometry(g)):
+                    gm.addGeometryObject(go.copy())
         n_robot = gm.ngeoms
         self.robot_geoms = np.arange(n_robot)
         self.obstacle_geoms = []
@@ -153,7 +161,7 @@ class CollisionWorld:
             self.object_geom = gm.addGeometryObject(go)
 
         disabled = {frozenset(p) for p in disabled_links}
-        link = [robot.link_of_geometry(g) for g in range(n_robot)]
+        link = [robot.model.frames[gm.geometryObjects[g].parentFrame].name for g in range(n_robot)]
         root_fixed = [gm.geometryObjects[g].parentJoint == 0 for g in range(n_robot)]
         keep = pair_filter or (lambda a, b: True)
         obstacle_name = {o: gm.geometryObjects[o].name for o in self.obstacle_geoms}

@@ -41,7 +41,7 @@ class RoadmapOptions:
     max_failures: int = 2000  # Vis-PRM: consecutive dropped samples that end a roadmap early
     tree: bool = False  # Super Graph edges only between different components
     resolution: float = 0.05  # rad: largest joint step between two checked configurations
-    margin: float = 0.015  # m: clearance of the moving pairs; half the largest Cartesian step
+    margin: float = 0.02  # m: clearance of the moving pairs; half the largest Cartesian step
     seed: int = 0
 
 
@@ -104,11 +104,13 @@ def _worlds(problem: Problem, options: RoadmapOptions) -> dict[str, CollisionWor
     parts = link_parts(problem.robot)
     margin = margin_rule(problem.robot, options.margin)
 
-    def world(rule):
+    def world(rule, without: str | None = None):
+        keep = None if without is None else (lambda name: parts.get(name) != without)
         return CollisionWorld(problem.robot, problem.spec.obstacles, problem.disabled.links(),
-                              pair_filter=part_filter(parts, rule), margin=margin)
+                              pair_filter=part_filter(parts, rule), margin=margin, links=keep)
 
-    return {"right": world(subsystem(RIGHT)), "left": world(subsystem(LEFT)),
+    # the elementary worlds leave the other arm out altogether (it is in no checked pair)
+    return {"right": world(subsystem(RIGHT), LEFT), "left": world(subsystem(LEFT), RIGHT),
             "node_right_torso": world(involving(LEFT)), "node_left_torso": world(involving(RIGHT)),
             "mixed": world(mixed)}
 

@@ -54,10 +54,11 @@ def visibility_prm(sample: Callable[[], np.ndarray], is_free: Callable[[np.ndarr
     guard: list[bool] = []
     comp: list[int] = []  # component label of each node (the index of its first guard)
     edges: list[tuple[int, int, float]] = []
-    failures = samples = 0
+    failures = samples = dim = 0
     while len(nodes) < options.max_nodes and failures < options.max_failures and samples < options.max_samples:
         samples += 1
         q = sample()
+        dim = len(q)
         if not is_free(q):
             failures += 1
             continue
@@ -94,4 +95,4 @@ def visibility_prm(sample: Callable[[], np.ndarray], is_free: Callable[[np.ndarr
             progress(len(nodes))
     e = np.array([(a, b) for a, b, _ in edges], dtype=np.int64).reshape(-1, 2)
     lengths = np.array([l for _, _, l in edges], dtype=float)
-    return Roadmap(np.array(nodes).reshape(len(nodes), -1), e, lengths, np.array(guard, dtype=bool), samples)
+    return Roadmap(np.array(nodes, dtype=float).reshape(len(nodes), dim), e, lengths, np.array(guard, dtype=bool), samples)

@@ -1,0 +1,229 @@
+"""`regrasp roadmap build` and `regrasp roadmap show` (click.testing.CliRunner on
+regrasp_cli.cli.main): one small build end to end, show (with and without a scene), a
+roadmap stale for a moved obstacle refused, help, and bad input as exit code 2 with one
+`error:` line and no traceback."""
+
+from __future__ import annotations
+
+import shutil
+from importlib.metadata import version
+from pathlib import Path
+
+import click
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from regrasp_cli.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOT_DIR = ROOT / "configs" / "robots" / "humanoid43"
+ROBOT_YAML = ROBOT_DIR / "robot.yaml"
+SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
+
+CLICK_MAJOR_MINOR = tuple(int(x) for x in version("click").split(".")[:2])
+pytestmark = pytest.mark.skipif(CLICK_MAJOR_MINOR < (8, 2), reason="needs click >= 8.2 (separate stderr)")
+
+
+def run(*args) -> "click.testing.Result":
+    # wide console: rich tables and paths are not wrapped
+    return CliRunner(env={"COLUMNS": "250"}).invoke(main, [str(a) for a in args])
+
+
+def scene_dict() -> dict:
+    d = yaml.safe_load(SCENE_YAML.read_text())
+    d["robot"] = str(ROBOT_YAML)
+    return d
+
+
+def write_scene(path: Path, d: dict) -> Path:
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    return path
+
+
+def assert_one_error_line(result, *words: str) -> str:
+    """Exit code 2, no traceback, exactly one `error:` line on stderr (other lines, if
+    any, are warnings) naming ``words``; returns the error line."""
+    assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
+    assert "Traceback" not in result.output and "Traceback" not in result.stderr
+    assert not isinstance(result.exception, Exception) or isinstance(result.exception, SystemExit)
+    lines = result.stderr.strip().splitlines()
+    errors = [ln for ln in lines if ln.startswith("error:")]
+    assert len(errors) == 1, result.stderr
+    assert all(ln.startswith(("error:", "warning:")) for ln in lines), result.stderr
+    for w in words:
+        assert w in errors[0], (w, errors[0])
+    return errors[0]
+
+
+def fresh_cache(tmp: Path, cache_dir: Path) -> Path:
+    """An empty cache holding only the (slow to compute) self-collision pairs."""
+    d = tmp / "cache"
+    src = Path(cache_dir) / "self_collision"
+    if src.is_dir():
+        shutil.copytree(src, d / "self_collision")
+    return d
+
+
+def table_rows(out: str) -> dict[str, str]:
+    rows = {}
+    for ln in out.splitlines():
+        if ln.startswith("│"):
+            cells = [c.strip() for c in ln.strip().strip("│").split("│")]
+            if len(cells) == 2:
+                rows[cells[0]] = cells[1]
+    return rows
+
+
+@pytest.fixture(scope="module")
+def built(problem, cache_dir, tmp_path_factory):
+    """One small `roadmap build` into a fresh cache: (result, cache dir, roadmap file)."""
+    d = fresh_cache(tmp_path_factory.mktemp("cli_roadmap"), cache_dir)
+    result = run("--cache-dir", d, "roadmap", "build", SCENE_YAML, "--nodes", "8", "--jobs", "1")
+    files = sorted((d / "roadmap").glob("*.h5")) if (d / "roadmap").is_dir() else []
+    return result, d, files
+
+
+# --------------------------------------------------------------------------- build and show
+
+
+def test_build_prints_the_summary_and_writes_the_roadmap(built):
+    result, d, files = built
+    assert result.exit_code == 0, (result.output, result.exception)
+    assert len(files) == 1, files
+    out = result.stdout
+    assert "graph mode, 8 nodes per elementary roadmap" in out
+    rows = table_rows(out)
+    for key in ("R_r (torso + right arm)", "R_l (torso + left arm)", "Super Graph", "collision checks",
+                "collision checks / s"):
+        assert key in rows, (key, rows)
+    assert rows["R_r (torso + right arm)"].startswith("8 nodes")
+    assert rows["R_l (torso + left arm)"].startswith("8 nodes")
+    assert int(rows["collision checks"].replace(",", "")) > 0
+    assert "Time per stage" in out
+    for stage in ("elementary roadmaps", "Super Graph nodes", "Super Graph edges", "write", "total"):
+        assert stage in rows, stage
+        float(rows[stage])
+    assert f"roadmap: {files[0]}" in out
+    # the printed summary is the stored roadmap's
+    from regrasp_cli.roadmap.build import read_roadmap, summary
+
+    art = read_roadmap(files[0])
+    for k, v in summary(art).items():
+        assert rows[k] == v
+
+
+def test_show_prints_provenance_and_summary(built):
+    _, _, files = built
+    result = run("roadmap", "show", files[0])
+    assert result.exit_code == 0, (result.output, result.exception)
+    rows = table_rows(result.stdout)
+    assert rows["format"] == "regrasp.roadmap v1"
+    for key in ("software", "created", "sha256 urdf", "sha256 robot_yaml", "sha256 obstacles", "sha256 params",
+                "R_r (torso + right arm)", "R_l (torso + left arm)", "Super Graph"):
+        assert key in rows, key
+    assert rows["R_r (torso + right arm)"].startswith("8 nodes")
+
+
+def test_show_accepts_its_own_scene(built):
+    _, d, files = built
+    result = run("--cache-dir", d, "roadmap", "show", files[0], "--scene", SCENE_YAML)
+    assert result.exit_code == 0, (result.output, result.exception)
+    assert "Super Graph" in result.stdout
+
+
+def test_show_refuses_a_roadmap_for_a_moved_obstacle(built, tmp_path):
+    _, d, files = built
+    s = scene_dict()
+    s["obstacles"][0]["pose"]["xyz"][0] += 0.1
+    other = write_scene(tmp_path / "moved.yaml", s)
+    result = run("--cache-dir", d, "roadmap", "show", files[0], "--scene", other)
+    line = assert_one_error_line(result, str(files[0]), "obstacles")
+    assert "rebuild" in line and "roadmap build" in line
+
+
+def test_show_missing_file(tmp_path):
+    missing = tmp_path / "nope.h5"
+    assert_one_error_line(run("roadmap", "show", missing), str(missing))
+
+
+def test_build_with_no_free_configuration_gives_an_empty_roadmap(problem, cache_dir, tmp_path):
+    """A box around the shoulders: every sample collides, the roadmaps are empty (this
+    used to crash with a numpy reshape error)."""
+    s = scene_dict()
+    s["obstacles"].append({"name": "cage", "box": {"size": [0.3, 0.3, 0.3]}, "pose": {"xyz": [0.0, 0.0, 1.2]}})
+    scene = write_scene(tmp_path / "cage.yaml", s)
+    d = fresh_cache(tmp_path, cache_dir)
+    result = run("--cache-dir", d, "roadmap", "build", scene, "--nodes", "4", "--jobs", "1", "--tree")
+    assert result.exit_code == 0, (result.output, result.exception)
+    rows = table_rows(result.stdout)
+    assert "tree mode" in result.stdout
+    assert rows["R_r (torso + right arm)"].startswith("0 nodes")
+    assert rows["Super Graph"].startswith("0 nodes")
+    files = list((d / "roadmap").glob("*.h5"))
+    assert len(files) == 1
+    shown = run("--cache-dir", d, "roadmap", "show", files[0], "--scene", scene)
+    assert shown.exit_code == 0, (shown.output, shown.exception)
+    assert table_rows(shown.stdout)["Super Graph"].startswith("0 nodes")
+
+
+# --------------------------------------------------------------------------- help
+
+
+def test_roadmap_help():
+    result = run("roadmap", "--help")
+    assert result.exit_code == 0, result.output
+    assert "build" in result.stdout and "show" in result.stdout and "Super Graph" in result.stdout
+
+
+def test_build_help():
+    result = run("roadmap", "build", "--help")
+    assert result.exit_code == 0, result.output
+    for word in ("SCENE", "--nodes", "--tree", "--seed", "--jobs"):
+        assert word in result.stdout, word
+
+
+def test_show_help():
+    result = run("roadmap", "show", "--help")
+    assert result.exit_code == 0, result.output
+    for word in ("FILE", "--scene"):
+        assert word in result.stdout, word
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+@pytest.mark.parametrize("option,value", [("--nodes", "0"), ("--nodes", "-3"), ("--jobs", "0")])
+def test_bad_numbers(tmp_path, option, value):
+    d = tmp_path / "cache"
+    line = assert_one_error_line(run("--cache-dir", d, "roadmap", "build", SCENE_YAML, option, value), option)
+    assert value in line
+    assert not (d / "roadmap").exists()
+
+
+def test_unknown_joint_in_the_robot_groups(tmp_path):
+    r = yaml.safe_load(ROBOT_YAML.read_text())
+    r["groups"]["right_arm"] = r["groups"]["right_arm"][:-1] + ["r_arm_j99"]
+    shutil.copy(ROBOT_DIR / "robot.urdf", tmp_path / "robot.urdf")
+    robot_yaml = tmp_path / "robot.yaml"
+    robot_yaml.write_text(yaml.safe_dump(r, sort_keys=False))
+    s = scene_dict()
+    s["robot"] = str(robot_yaml)
+    scene = write_scene(tmp_path / "scene.yaml", s)
+    d = tmp_path / "cache"
+    assert_one_error_line(run("--cache-dir", d, "roadmap", "build", scene, "--nodes", "4", "--jobs", "1"),
+                          "r_arm_j99", "groups.right_arm", str(robot_yaml))
+    assert not (d / "roadmap").exists()
+
+
+def test_missing_scene_file(tmp_path):
+    missing = tmp_path / "nope.yaml"
+    assert_one_error_line(run("--cache-dir", tmp_path / "cache", "roadmap", "build", missing, "--nodes", "4"),
+                          str(missing))
+
+
+def test_nodes_must_be_an_integer():
+    result = run("roadmap", "build", SCENE_YAML, "--nodes", "many")
+    assert result.exit_code == 2
+    assert "Traceback" not in result.output
+    assert "Invalid value for '--nodes'" in result.stderr
