@@ -41,7 +41,7 @@ class RoadmapOptions:
     max_failures: int = 2000  # Vis-PRM: consecutive dropped samples that end a roadmap early
     tree: bool = False  # Super Graph edges only between different components
     resolution: float = 0.05  # rad: largest joint step between two checked configurations
-    margin: float = 0.02  # m: clearance of the moving pairs; half the largest Cartesian step
+    margin: float = 0.03  # m: clearance of the moving pairs; half the largest Cartesian step
     seed: int = 0
 
 

@@ -136,12 +136,22 @@ def all_eight_sources() -> np.ndarray:
     return np.array([(i, j, s) for i in (0, 1) for j in (0, 1) for s in (0, 1)], dtype=np.int64)
 
 
+def _qualifies(source, r_adj, l_adj, a, b) -> bool:
+    """The defining property of a candidate edge, the slow way: parts equal or adjacent on
+    both sides, and the same torso source unless it is a torso swap."""
+    (i, j, s), (i2, j2, s2) = source[a], source[b]
+    parts = (i == i2 or i2 in r_adj[i]) and (j == j2 or j2 in l_adj[j])
+    return bool(parts and (s == s2 or (i == i2 and j == j2)))
+
+
 def test_candidate_edges_tiny_complete_case():
-    """R_r: 0-1; R_l: 0-1; all 8 Super Graph candidates present: every pair qualifies."""
+    """R_r: 0-1; R_l: 0-1; all 8 Super Graph candidates present: the 6 pairs within each
+    torso source and the 4 torso swaps."""
     source = all_eight_sources()
-    got = candidate_edges(source, [{1}, {0}], [{1}, {0}])
-    expected = [(a, b) for a in range(8) for b in range(a + 1, 8)]
-    assert got.dtype == np.int64 and got.shape == (28, 2)
+    r_adj, l_adj = [{1}, {0}], [{1}, {0}]
+    got = candidate_edges(source, r_adj, l_adj)
+    expected = [(a, b) for a in range(8) for b in range(a + 1, 8) if _qualifies(source, r_adj, l_adj, a, b)]
+    assert got.dtype == np.int64 and got.shape == (16, 2)
     assert [tuple(map(int, p)) for p in got] == expected
 
 
@@ -157,13 +167,12 @@ def test_candidate_edges_tiny_partial_case():
     source = np.array([(0, 0, 0), (0, 1, 1), (1, 0, 1), (1, 1, 0), (2, 0, 0), (2, 1, 0)], dtype=np.int64)
     r_adj, l_adj = [{1}, {0}, set()], [{1}, {0}]
     got = [tuple(map(int, p)) for p in candidate_edges(source, r_adj, l_adj)]
-    assert got == [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3), (4, 5)]
-    # the defining property, checked the slow way
+    # same torso source: 0-3 (both from R_r, parts adjacent), 1-2 (both from R_l), 4-5
+    # (R_r, right part 2 unchanged, left parts adjacent); no swap pair exists here
+    assert got == [(0, 3), (1, 2), (4, 5)]
     for a in range(len(source)):
         for b in range(a + 1, len(source)):
-            (i, j, _), (i2, j2, _) = source[a], source[b]
-            ok = (i == i2 or i2 in r_adj[i]) and (j == j2 or j2 in l_adj[j])
-            assert ok == ((a, b) in got)
+            assert _qualifies(source, r_adj, l_adj, a, b) == ((a, b) in got)
 
 
 def test_candidate_edges_empty():
