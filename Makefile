@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 SCENE := configs/scenes/desk_handover.yaml
 
-.PHONY: demo test setup bench-collision bench-grasps clean
+.PHONY: demo test setup bench-collision bench-grasps bench-roadmap clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -18,6 +18,7 @@ setup: $(BIN)/python
 demo: setup
 	$(BIN)/regrasp info $(SCENE)
 	$(BIN)/regrasp grasps build $(SCENE)
+	$(BIN)/regrasp roadmap build $(SCENE)
 
 test: setup
 	$(BIN)/python -m pytest
@@ -27,6 +28,9 @@ bench-collision: setup
 
 bench-grasps: setup
 	$(BIN)/python scripts/bench_grasps.py
+
+bench-roadmap: setup
+	$(BIN)/python scripts/bench_roadmap.py
 
 clean:
 	rm -rf $(VENV) cache .pytest_cache
