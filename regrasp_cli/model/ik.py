@@ -45,6 +45,34 @@ def _dls(J: np.ndarray, e: np.ndarray, damping: float) -> np.ndarray:
     return J.T @ np.linalg.solve(JJt, e)
 
 
+def _solve(robot: Robot, frame: int, q_seed: np.ndarray, idx: np.ndarray, rng: np.random.Generator,
+           options: IKOptions, residual, reference, rows: slice) -> IKResult:
+    """DLS with joint clamping and random restarts.  ``residual(X) -> (e, position error,
+    rotation error)`` with ``e`` expressed in ``reference``, the frame of the Jacobian
+    rows kept (``rows``)."""
+    model, data = robot.model, robot.model.createData()
+    lo, hi = robot.lower[idx], robot.upper[idx]
+    best, iters = None, 0
+    for attempt in range(options.restarts + 1):
+        q = q_seed.copy()
+        if attempt:
+            q[idx] = rng.uniform(lo, hi)
+        for _ in range(options.max_iters):
+            iters += 1
+            qp = robot.to_pin(q)
+            pin.forwardKinematics(model, data, qp)
+            e, ep, er = residual(pin.updateFramePlacement(model, data, frame))
+            if ep < options.tol_position and er < options.tol_rotation:
+                return IKResult(q, True, ep, er, iters)
+            J = pin.computeFrameJacobian(model, data, qp, frame, reference)[rows]
+            J = J[:, robot._idx_q[idx]] if robot._identity else _jacobian_columns(robot, J, idx)
+            dq = np.clip(_dls(J, e, options.damping), -options.max_step, options.max_step)
+            q[idx] = np.clip(q[idx] + dq, lo, hi)
+        if best is None or ep + 0.1 * er < best.position_error + 0.1 * best.rotation_error:
+            best = IKResult(q, False, ep, er, iters)
+    return IKResult(best.q, False, best.position_error, best.rotation_error, iters)
+
+
 def solve_pose(robot: Robot, frame: int, X_WT: np.ndarray, q_seed: np.ndarray, idx: np.ndarray,
                rng: np.random.Generator, options: IKOptions = IKOptions()) -> IKResult:
     """Move the joints ``idx`` so that frame ``frame`` reaches the pose ``X_WT`` (4, 4).
@@ -52,58 +80,24 @@ def solve_pose(robot: Robot, frame: int, X_WT: np.ndarray, q_seed: np.ndarray, i
     The other joints keep their values from ``q_seed``.  Returns the best attempt; its
     ``success`` says whether both tolerances were met.
     """
-    model, data = robot.model, robot.model.createData()
     target = pin.SE3(X_WT[:3, :3].copy(), X_WT[:3, 3].copy())
-    lo, hi = robot.lower[idx], robot.upper[idx]
-    best, iters = None, 0
-    for attempt in range(options.restarts + 1):
-        q = q_seed.copy()
-        if attempt:
-            q[idx] = rng.uniform(lo, hi)
-        for _ in range(options.max_iters):
-            iters += 1
-            qp = robot.to_pin(q)
-            pin.forwardKinematics(model, data, qp)
-            X = pin.updateFramePlacement(model, data, frame)
-            err = pin.log6(X.actInv(target)).vector  # in the local frame
-            ep, er = np.linalg.norm(X.translation - target.translation), np.linalg.norm(err[3:])
-            if ep < options.tol_position and er < options.tol_rotation:
-                return IKResult(q, True, ep, er, iters)
-            J = pin.computeFrameJacobian(model, data, qp, frame, pin.LOCAL)
-            J = J[:, robot._idx_q[idx]] if robot._identity else _jacobian_columns(robot, J, idx)
-            dq = np.clip(_dls(J, err, options.damping), -options.max_step, options.max_step)
-            q[idx] = np.clip(q[idx] + dq, lo, hi)
-        if best is None or ep + 0.1 * er < best.position_error + 0.1 * best.rotation_error:
-            best = IKResult(q, False, ep, er, iters)
-    return IKResult(best.q, False, best.position_error, best.rotation_error, iters)
+
+    def residual(X):
+        e = pin.log6(X.actInv(target)).vector  # in the local frame
+        return e, float(np.linalg.norm(X.translation - target.translation)), float(np.linalg.norm(e[3:]))
+
+    return _solve(robot, frame, q_seed, idx, rng, options, residual, pin.LOCAL, slice(None))
 
 
 def solve_position(robot: Robot, frame: int, p_WT: np.ndarray, q_seed: np.ndarray, idx: np.ndarray,
                    rng: np.random.Generator, options: IKOptions = IKOptions()) -> IKResult:
     """Move the joints ``idx`` so that the origin of ``frame`` reaches the point ``p_WT`` (3,)."""
-    model, data = robot.model, robot.model.createData()
-    lo, hi = robot.lower[idx], robot.upper[idx]
-    best, iters = None, 0
-    for attempt in range(options.restarts + 1):
-        q = q_seed.copy()
-        if attempt:
-            q[idx] = rng.uniform(lo, hi)
-        for _ in range(options.max_iters):
-            iters += 1
-            qp = robot.to_pin(q)
-            pin.forwardKinematics(model, data, qp)
-            p = pin.updateFramePlacement(model, data, frame).translation
-            e = p_WT - p
-            ep = float(np.linalg.norm(e))
-            if ep < options.tol_position:
-                return IKResult(q, True, ep, 0.0, iters)
-            J = pin.computeFrameJacobian(model, data, qp, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
-            J = J[:, robot._idx_q[idx]] if robot._identity else _jacobian_columns(robot, J, idx)
-            dq = np.clip(_dls(J, e, options.damping), -options.max_step, options.max_step)
-            q[idx] = np.clip(q[idx] + dq, lo, hi)
-        if best is None or ep < best.position_error:
-            best = IKResult(q, False, ep, 0.0, iters)
-    return IKResult(best.q, False, best.position_error, 0.0, iters)
+
+    def residual(X):
+        e = p_WT - X.translation
+        return e, float(np.linalg.norm(e)), 0.0
+
+    return _solve(robot, frame, q_seed, idx, rng, options, residual, pin.LOCAL_WORLD_ALIGNED, slice(0, 3))
 
 
 def _jacobian_columns(robot: Robot, J: np.ndarray, idx: np.ndarray) -> np.ndarray:
