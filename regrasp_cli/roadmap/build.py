@@ -123,6 +123,15 @@ def q_base(problem: Problem) -> np.ndarray:
     return q
 
 
+def edge_chains(robot) -> tuple[tuple[np.ndarray, ...] | None, ...]:
+    """Per edge kind, the joint sets through which the checked pairs move relative to each
+    other (see :meth:`LocalPlanner.steps`): with the right roadmap's torso, L's pairs with
+    the obstacles and the torso move through torso + left arm, with R through both arms;
+    symmetrically; a torso swap checks all pairs (every joint)."""
+    t, r, l = robot.groups["torso"], robot.groups["right_arm"], robot.groups["left_arm"]
+    return ((np.r_[t, l], np.r_[l, r]), (np.r_[t, r], np.r_[l, r]), None)
+
+
 def _elementary(side: str) -> tuple[Roadmap, int]:
     problem, worlds, options = _SHARED["problem"], _SHARED["worlds"], _SHARED["options"]
     robot = problem.robot
@@ -149,11 +158,11 @@ def _elementary(side: str) -> tuple[Roadmap, int]:
 def _check_edges(chunk: np.ndarray) -> tuple[np.ndarray, int]:
     """Validity (c,) of candidate Super Graph edges (c, 2), and the checks made."""
     worlds, nodes, source = _SHARED["worlds"], _SHARED["nodes"], _SHARED["source"]
-    planner = _SHARED["planner"]
+    planner, chains = _SHARED["planner"], _SHARED["chains"]
     by_kind = (worlds["node_right_torso"], worlds["node_left_torso"], worlds["mixed"])
     before = sum(w.n_checks for w in by_kind)
-    ok = np.array([planner.segment_free(by_kind[edge_kind(source, a, b)], nodes[a], nodes[b]) for a, b in chunk],
-                  dtype=bool)
+    ok = np.array([planner.segment_free(by_kind[k], nodes[a], nodes[b], chains[k])
+                   for a, b in chunk for k in (edge_kind(source, a, b),)], dtype=bool)
     return ok, sum(w.n_checks for w in by_kind) - before
 
 
@@ -177,7 +186,8 @@ def build_roadmap(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: i
     worlds = _worlds(problem, options)
     weights = joint_weights(robot)
     planner = LocalPlanner(options.resolution, options.margin, joint_reach(robot))
-    _SHARED.update(problem=problem, worlds=worlds, options=options, weights=weights, planner=planner)
+    _SHARED.update(problem=problem, worlds=worlds, options=options, weights=weights, planner=planner,
+                   chains=edge_chains(robot))
     checks = 0
     try:
         if progress:
@@ -207,8 +217,9 @@ def build_roadmap(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: i
             uf, by_kind = UnionFind(len(nodes)), (worlds["node_right_torso"], worlds["node_left_torso"], worlds["mixed"])
             before = sum(w.n_checks for w in by_kind)
             for k, (a, b) in enumerate(cand):
+                kind = edge_kind(source, a, b)
                 if uf.find(int(a)) != uf.find(int(b)) and \
-                        planner.segment_free(by_kind[edge_kind(source, a, b)], nodes[a], nodes[b]):
+                        planner.segment_free(by_kind[kind], nodes[a], nodes[b], _SHARED["chains"][kind]):
                     uf.union(int(a), int(b))
                     valid[k] = True
                 if progress and k % 256 == 0:

@@ -79,13 +79,23 @@ class LocalPlanner:
     margin: float  # m: clearance kept by every pair that moves; half the Cartesian step
     reach: np.ndarray  # (nq,) from :func:`joint_reach`
 
-    def steps(self, q0: np.ndarray, q1: np.ndarray) -> int:
-        """Number of intervals the segment is cut into."""
-        d = np.abs(q1 - q0)
-        return max(1, int(np.ceil(d.max() / self.resolution)), int(np.ceil(d @ self.reach / (2 * self.margin))))
+    def steps(self, q0: np.ndarray, q1: np.ndarray, chains: tuple[np.ndarray, ...] | None = None) -> int:
+        """Number of intervals the segment is cut into.
 
-    def segment_free(self, world, q0: np.ndarray, q1: np.ndarray) -> bool:
-        return world.segment_free(q0, q1, self.resolution, self.steps(q0, q1))
+        ``chains``, when given, lists index sets of joints such that every checked pair
+        moves relative to itself only through the joints of one set (e.g. the left arm
+        against the obstacles: torso + left arm; against the right arm: both arms, not the
+        torso that carries both); the Cartesian bound is then the largest over the sets,
+        not the sum over every joint.
+        """
+        d = np.abs(q1 - q0)
+        w = d * self.reach
+        cart = w.sum() if chains is None else max(float(w[c].sum()) for c in chains)
+        return max(1, int(np.ceil(d.max() / self.resolution)), int(np.ceil(cart / (2 * self.margin))))
+
+    def segment_free(self, world, q0: np.ndarray, q1: np.ndarray,
+                     chains: tuple[np.ndarray, ...] | None = None) -> bool:
+        return world.segment_free(q0, q1, self.resolution, self.steps(q0, q1, chains))
 
 
 def distance(q0: np.ndarray, q1: np.ndarray, weights: np.ndarray) -> float | np.ndarray:
