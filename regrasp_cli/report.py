@@ -124,7 +124,7 @@ def _positive(value, name: str) -> None:
 
 
 def build_options(scene_seed: int, seed: int | None, jobs: int, positions: int | None, orientations: int | None,
-                  target: int | None = None):
+                  target: int | None = None, weights: str | None = None):
     from dataclasses import replace
 
     from regrasp_cli.grasp.build import BuildOptions
@@ -139,12 +139,23 @@ def build_options(scene_seed: int, seed: int | None, jobs: int, positions: int |
         raise InputError(None, "--target", f"expected an integer >= 0, found {target}")
     g = replace(g, n_positions=positions or g.n_positions, n_orientations=orientations or g.n_orientations,
                 target=g.target if target is None else target)
+    if weights is not None:
+        from regrasp_cli.grasp.quality import QualityWeights
+
+        try:
+            w = [float(x) for x in weights.split(",")]
+        except ValueError:
+            w = []
+        if len(w) != 4 or any(not (x >= 0) for x in w) or sum(w) <= 0:
+            raise InputError(None, "--weights", f"expected four numbers >= 0 (not all 0) separated by commas, "
+                                                f"found {weights!r}")
+        g = replace(g, weights=QualityWeights(*w))
     return replace(options, grasp=g)
 
 
 def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, jobs: int,
                      positions: int | None, orientations: int | None, target: int | None = None,
-                     console: Console | None = None) -> None:
+                     weights: str | None = None, console: Console | None = None) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from regrasp_cli.grasp.build import build_grasps
@@ -152,7 +163,7 @@ def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, 
 
     console = console or Console()
     spec = load_scene_spec(scene)
-    options = build_options(spec.planning.seed, seed, jobs, positions, orientations, target)
+    options = build_options(spec.planning.seed, seed, jobs, positions, orientations, target, weights)
     load_problem(scene, cache_dir)  # every input error before the progress bars start
     hands = ["right", "left"] if hand == "both" else [hand]
     reports = []

@@ -252,3 +252,20 @@ def test_flat_box_obstacle_mesh_is_still_allowed(tmp_path):
 def test_bad_numbers(cache_dir, option, value):
     result = run("--cache-dir", cache_dir, "grasps", "build", SCENE_YAML, *SMALL, option, value)
     assert_one_error_line(result, option)
+
+
+@pytest.mark.parametrize("weights", ["1,1,1", "a,b,c,d", "1,1,1,-6", "0,0,0,0"])
+def test_bad_weights(cache_dir, weights):
+    result = run("--cache-dir", cache_dir, "grasps", "build", SCENE_YAML, "--weights", weights)
+    line = assert_one_error_line(result, "--weights")
+    assert "four numbers" in line
+
+
+def test_weights_change_the_ranking_inputs(problem):
+    """Other weights are other parameters: the list is another artefact (own hash)."""
+    from regrasp_cli.grasp.build import provenance
+    from regrasp_cli.report import build_options
+
+    a = provenance(problem, "right", build_options(0, None, 1, 8, 64, 0))
+    b = provenance(problem, "right", build_options(0, None, 1, 8, 64, 0, "1,1,1,1"))
+    assert a.inputs["params"] != b.inputs["params"] and a.inputs["mesh"] == b.inputs["mesh"]
