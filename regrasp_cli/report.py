@@ -116,6 +116,19 @@ def print_info(scene: Path, cache_dir: Path, seed: int | None, console: Console 
         console.print(f"The object's {pose} pose is {verdict}.")
 
 
+def provenance_table(file: Path, prov) -> Table:
+    """A two-column table (provenance, value) headed by an artefact's stored provenance."""
+    t = Table(title=f"{file}")
+    t.add_column("provenance")
+    t.add_column("value")
+    t.add_row("format", f"{prov.format} v{prov.format_version}")
+    t.add_row("software", prov.software_version)
+    t.add_row("created", prov.created)
+    for k, v in prov.inputs.items():
+        t.add_row(f"sha256 {k}", v[:16] + "…")
+    return t
+
+
 def _positive(value, name: str) -> None:
     from regrasp_cli.errors import InputError
 
@@ -213,14 +226,7 @@ def show_grasps(file: Path, best: int, scene: Path | None, cache_dir: Path, cons
         problem = load_problem(scene, cache_dir)
         expected = provenance(problem, str(_hand_of(file)), stored_options(file))
     glist = read_grasp_list(file, expected)
-    t = Table(title=f"{file}")
-    t.add_column("provenance")
-    t.add_column("value")
-    t.add_row("format", f"{prov.format} v{prov.format_version}")
-    t.add_row("software", prov.software_version)
-    t.add_row("created", prov.created)
-    for k, v in prov.inputs.items():
-        t.add_row(f"sha256 {k}", v[:16] + "…")
+    t = provenance_table(file, prov)
     t.add_row("hand", glist.hand)
     t.add_row("grasps", str(len(glist)))
     console.print(t)
@@ -305,14 +311,7 @@ def show_roadmap(file: Path, scene: Path | None, cache_dir: Path, console: Conso
             options = RoadmapOptions(**json.loads(f.attrs["options"]))
         expected = provenance(problem, options)
     art = read_roadmap(file, expected)
-    t = Table(title=f"{file}")
-    t.add_column("what")
-    t.add_column("value")
-    t.add_row("format", f"{prov.format} v{prov.format_version}")
-    t.add_row("software", prov.software_version)
-    t.add_row("created", prov.created)
-    for k, v in prov.inputs.items():
-        t.add_row(f"sha256 {k}", v[:16] + "…")
+    t = provenance_table(file, prov)
     for k, v in summary(art).items():
         t.add_row(k, v)
     console.print(t)

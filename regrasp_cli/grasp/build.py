@@ -27,7 +27,7 @@ from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, grasp_for_frame
-from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
+from regrasp_cli.grasp.surface import build_surface, sampling_step
 from regrasp_cli.grasp.workspace import WorkspaceOptions, hand_workspace
 from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.parallel import ordered_map
