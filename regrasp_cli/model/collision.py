@@ -243,12 +243,15 @@ class CollisionWorld:
                 out.append((self.geometry_name(cp.first), self.geometry_name(cp.second)))
         return out
 
-    def segment_free(self, q0: np.ndarray, q1: np.ndarray, resolution: float, min_steps: int = 1) -> bool:
+    def segment_free(self, q0: np.ndarray, q1: np.ndarray, resolution: float, min_steps: int = 1,
+                     limit: int | None = None) -> bool:
         """Straight segment q0 -> q1 in joint space, checked so that no joint moves more than
         ``resolution`` (rad or m) between two checked configurations.  The end points are
         checked too.  Samples are visited in bisection order (coarse to fine), so a
-        colliding segment is usually rejected after few checks."""
-        for t in segment_samples(q0, q1, resolution, min_steps):
+        colliding segment is usually rejected after few checks.  With ``limit``, only the
+        first ``limit`` samples of that order are checked: False is then a proof of
+        collision, True only says none was found."""
+        for t in segment_samples(q0, q1, resolution, min_steps)[:limit]:
             if not self.is_free(q0 + t * (q1 - q0)):
                 return False
         return True

@@ -33,6 +33,7 @@ from regrasp_cli.store import Provenance, canonical_json, read_artefact, read_pr
 
 FORMAT, FORMAT_VERSION = "regrasp.roadmap", 1
 EDGE_CHUNK = 64
+PROBE = 16  # samples of a segment in Vis-PRM's cheap visibility test
 
 
 @dataclass(frozen=True)
@@ -150,6 +151,7 @@ def _elementary(side: str) -> tuple[Roadmap, int]:
         sample=lambda: rng.uniform(lo, hi),
         is_free=lambda x: world.is_free(full(x)),
         segment_free=lambda x0, x1: _SHARED["planner"].segment_free(world, full(x0), full(x1)),
+        maybe_free=lambda x0, x1: _SHARED["planner"].segment_free(world, full(x0), full(x1), limit=PROBE),
         distance=lambda x0, xs: distance(x0, xs, w),
         options=VisPRMOptions(max_nodes=options.nodes, max_failures=options.max_failures))
     return roadmap, world.n_checks

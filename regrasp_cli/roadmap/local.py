@@ -94,8 +94,10 @@ class LocalPlanner:
         return max(1, int(np.ceil(d.max() / self.resolution)), int(np.ceil(cart / (2 * self.margin))))
 
     def segment_free(self, world, q0: np.ndarray, q1: np.ndarray,
-                     chains: tuple[np.ndarray, ...] | None = None) -> bool:
-        return world.segment_free(q0, q1, self.resolution, self.steps(q0, q1, chains))
+                     chains: tuple[np.ndarray, ...] | None = None, limit: int | None = None) -> bool:
+        """Certified check; with ``limit``, only the first (coarsest) ``limit`` samples: a
+        cheap test whose False is a proof of collision."""
+        return world.segment_free(q0, q1, self.resolution, self.steps(q0, q1, chains), limit)
 
 
 def distance(q0: np.ndarray, q1: np.ndarray, weights: np.ndarray) -> float | np.ndarray:

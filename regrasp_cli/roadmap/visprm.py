@@ -9,7 +9,12 @@ dropped.  The roadmap is complete when ``max_failures`` consecutive samples were
 The result is a compact roadmap, which keeps the composed Super Graph small.
 
 A planner is a function of callables (as caelan/motion-planners does), so it works for any
-subsystem: ``sample() -> q``, ``is_free(q)``, ``segment_free(q0, q1)``, ``distance(q0, qs)``.
+subsystem: ``sample() -> q``, ``is_free(q)``, ``segment_free(q0, q1)``, ``distance(q0, qs)``,
+and optionally ``maybe_free(q0, q1)``, a cheap necessary test.  With it, a sample that
+seems to see a single component is dropped without certifying that segment (Vis-PRM would
+drop it anyway if it does see it; if it does not, a guard is missed, which only costs
+coverage); on the default robot this removed most of the checks of the elementary
+roadmaps, which are spent certifying visible segments of samples that are then dropped.
 """
 
 from __future__ import annotations
@@ -49,7 +54,11 @@ class Roadmap:
 def visibility_prm(sample: Callable[[], np.ndarray], is_free: Callable[[np.ndarray], bool],
                    segment_free: Callable[[np.ndarray, np.ndarray], bool],
                    distance: Callable[[np.ndarray, np.ndarray], np.ndarray],
-                   options: VisPRMOptions = VisPRMOptions(), progress: Callable[[int], None] | None = None) -> Roadmap:
+                   options: VisPRMOptions = VisPRMOptions(), progress: Callable[[int], None] | None = None,
+                   maybe_free: Callable[[np.ndarray, np.ndarray], bool] | None = None) -> Roadmap:
+    """``maybe_free(q0, q1)``: a cheap test that may only answer False for a segment that
+    really collides (e.g. a few samples of it); defaults to ``segment_free``."""
+    maybe_free = maybe_free or segment_free
     nodes: list[np.ndarray] = []
     guard: list[bool] = []
     comp: list[int] = []  # component label of each node (the index of its first guard)
@@ -66,12 +75,29 @@ def visibility_prm(sample: Callable[[], np.ndarray], is_free: Callable[[np.ndarr
         if guards:  # nearest guards first: the likeliest to be visible
             d = distance(q, np.array([nodes[i] for i in guards]))
             guards = [guards[k] for k in np.argsort(d, kind="stable")]
-        seen: dict[int, int] = {}  # component -> the guard seen in it
+        # Which components does q see?  A cheap test first: a collision found among the
+        # first samples of a segment proves it invisible; a segment that passes is only
+        # "maybe visible".  Every decision that stores something is proven: a guard is only
+        # made when every guard was proven invisible, a connector's edges are certified.
+        # A sample that maybe sees one component is dropped without certifying that segment
+        # (dropping is always safe): this is where Vis-PRM spends most of its checks.
+        maybe: dict[int, int] = {}  # component -> a guard that passed the cheap test
         for g in guards:
-            if comp[g] in seen:
+            if comp[g] not in maybe and maybe_free(q, nodes[g]):
+                maybe[comp[g]] = g
+        seen: dict[int, int] = {}  # component -> a guard certified visible
+        if len(maybe) >= 2:
+            for c, g in maybe.items():
+                for g2 in [g] + [h for h in guards if comp[h] == c and h != g]:
+                    if segment_free(q, nodes[g2]):
+                        seen[c] = g2
+                        break
+            if len(seen) < 2:
+                failures += 1
                 continue
-            if segment_free(q, nodes[g]):
-                seen[comp[g]] = g
+        elif maybe:
+            failures += 1
+            continue
         if not seen:
             nodes.append(q)
             guard.append(True)

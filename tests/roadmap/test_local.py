@@ -49,16 +49,18 @@ def test_segment_free_passes_resolution_and_steps_to_the_world():
     calls = []
 
     class FakeWorld:
-        def segment_free(self, q0, q1, resolution, min_steps=1):
-            calls.append((q0.copy(), q1.copy(), resolution, min_steps))
+        def segment_free(self, q0, q1, resolution, min_steps=1, limit=None):
+            calls.append((q0.copy(), q1.copy(), resolution, min_steps, limit))
             return True
 
     p = LocalPlanner(resolution=0.125, margin=1 / 64, reach=np.array([1.0, 2.0]))
     q0, q1 = np.zeros(2), np.array([0.5, -0.25])
     assert p.segment_free(FakeWorld(), q0, q1) is True
-    assert len(calls) == 1
-    a, b, res, n = calls[0]
-    assert np.array_equal(a, q0) and np.array_equal(b, q1) and res == 0.125 and n == 32
+    assert p.segment_free(FakeWorld(), q0, q1, limit=16) is True
+    assert len(calls) == 2
+    a, b, res, n, limit = calls[0]
+    assert np.array_equal(a, q0) and np.array_equal(b, q1) and res == 0.125 and n == 32 and limit is None
+    assert calls[1][3:] == (32, 16)  # the cheap test: same cut, only the first 16 samples
 
 
 # --------------------------------------------------------------------------- distance

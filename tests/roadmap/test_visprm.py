@@ -122,3 +122,33 @@ def test_neighbours(disc_roadmap):
     assert sum(len(s) for s in adj) == 2 * len(disc_roadmap.edges)
     for a, b in disc_roadmap.edges:
         assert int(b) in adj[int(a)] and int(a) in adj[int(b)]
+
+
+def test_cheap_visibility_test_keeps_guards_invisible_and_connectors_certified():
+    """With a cheap necessary test (only a few samples of each segment), guards are still
+    pairwise invisible and every stored edge is certified by the exact test."""
+    import numpy as np
+
+    from regrasp_cli.roadmap.visprm import VisPRMOptions, visibility_prm
+
+    centre, radius = np.array([0.5, 0.5]), 0.2
+
+    def free(q):
+        return np.linalg.norm(q - centre) > radius
+
+    def segment(q0, q1, n=200):
+        return all(free(q0 + t * (q1 - q0)) for t in np.linspace(0.0, 1.0, n))
+
+    rng = np.random.default_rng(4)
+    rm = visibility_prm(lambda: rng.uniform(0.0, 1.0, 2), free, segment,
+                        lambda q, qs: np.linalg.norm(np.asarray(qs) - q, axis=-1),
+                        VisPRMOptions(max_nodes=30, max_failures=300),
+                        maybe_free=lambda q0, q1: segment(q0, q1, n=3))
+    guards = np.flatnonzero(rm.guard)
+    assert len(guards) >= 2
+    for i in guards:
+        for j in guards:
+            if i < j:
+                assert not segment(rm.nodes[i], rm.nodes[j])
+    for a, b in rm.edges:
+        assert segment(rm.nodes[a], rm.nodes[b])
