@@ -189,6 +189,20 @@ def test_unknown_joint_in_the_robot_groups(tmp_path):
     assert not (d / "roadmap").exists()
 
 
+def test_unknown_group_in_the_robot(tmp_path):
+    r = yaml.safe_load(ROBOT_YAML.read_text())
+    r["groups"]["head"] = ["torso_yaw"]
+    shutil.copy(ROBOT_DIR / "robot.urdf", tmp_path / "robot.urdf")
+    robot_yaml = tmp_path / "robot.yaml"
+    robot_yaml.write_text(yaml.safe_dump(r, sort_keys=False))
+    s = scene_dict()
+    s["robot"] = str(robot_yaml)
+    scene = write_scene(tmp_path / "scene.yaml", s)
+    line = assert_one_error_line(run("--cache-dir", tmp_path / "cache", "roadmap", "build", scene, "--nodes", "4"),
+                                 "groups.head", str(robot_yaml))
+    assert "torso, right_arm, left_arm" in line
+
+
 def test_missing_scene_file(tmp_path):
     missing = tmp_path / "nope.yaml"
     assert_one_error_line(run("--cache-dir", tmp_path / "cache", "roadmap", "build", missing, "--nodes", "4"),
