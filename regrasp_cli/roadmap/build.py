@@ -201,7 +201,6 @@ def build_roadmap(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: i
             progress("elementary roadmaps", 2, 2)
 
         t1 = time.perf_counter()
-        nt = len(robot.groups["torso"])
         base = q_base(problem)
         before = worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks
         nodes, source, tested_nodes = compose_nodes(robot, base, right.nodes, left.nodes,
@@ -209,7 +208,6 @@ def build_roadmap(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: i
                                                     worlds["node_left_torso"].is_free)
         checks += worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks - before
         seconds["Super Graph nodes"] = time.perf_counter() - t1
-        del nt
 
         t2 = time.perf_counter()
         cand = candidate_edges(source, right.neighbours(), left.neighbours())
