@@ -1,0 +1,85 @@
+"""RRT-Connect and shortcut smoothing on a 2-D point robot with known free space."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from regrasp_cli.roadmap.rrt import RRTOptions, path_length, rrt_connect, shortcut
+
+
+def euclid(q, qs):
+    return np.linalg.norm(np.asarray(qs) - q, axis=-1)
+
+
+def wall_world(gap_y=(0.45, 0.55)):
+    """Unit square with a vertical wall at x in [0.48, 0.52] except for a gap."""
+
+    def free(q):
+        inside = np.all((q >= 0.0) & (q <= 1.0))
+        in_wall = 0.48 <= q[0] <= 0.52 and not (gap_y[0] <= q[1] <= gap_y[1])
+        return bool(inside and not in_wall)
+
+    def segment(q0, q1):
+        n = max(2, int(np.ceil(np.linalg.norm(q1 - q0) / 0.002)) + 1)
+        return all(free(q0 + t * (q1 - q0)) for t in np.linspace(0.0, 1.0, n))
+
+    return free, segment
+
+
+def test_straight_line_when_free():
+    free, segment = wall_world()
+    rng = np.random.default_rng(0)
+    res = rrt_connect(np.array([0.1, 0.1]), np.array([0.3, 0.9]), lambda: rng.uniform(0, 1, 2), segment, euclid, rng)
+    assert res.path.shape == (2, 2) and res.iterations == 0
+
+
+def test_path_through_the_gap_is_collision_free():
+    free, segment = wall_world()
+    start, goal = np.array([0.1, 0.1]), np.array([0.9, 0.9])
+    rng = np.random.default_rng(1)
+    res = rrt_connect(start, goal, lambda: rng.uniform(0, 1, 2), segment, euclid, rng, RRTOptions(step=0.1))
+    assert res.path is not None
+    assert np.array_equal(res.path[0], start) and np.array_equal(res.path[-1], goal)
+    assert all(segment(a, b) for a, b in zip(res.path[:-1], res.path[1:]))
+    # it must cross the wall through the gap
+    crossing = [q for q in res.path if 0.45 <= q[0] <= 0.55]
+    assert all(0.45 <= q[1] <= 0.55 for q in crossing)
+
+
+def test_same_seed_same_path():
+    free, segment = wall_world()
+    paths = []
+    for _ in range(2):
+        rng = np.random.default_rng(7)
+        paths.append(rrt_connect(np.array([0.1, 0.5]), np.array([0.9, 0.2]), lambda: rng.uniform(0, 1, 2),
+                                 segment, euclid, rng, RRTOptions(step=0.1)).path)
+    assert np.array_equal(paths[0], paths[1])
+
+
+def test_budget_exhausted_returns_none():
+    free, segment = wall_world(gap_y=(2.0, 2.0))  # no gap: the sides are disconnected
+    rng = np.random.default_rng(2)
+    res = rrt_connect(np.array([0.1, 0.5]), np.array([0.9, 0.5]), lambda: rng.uniform(0, 1, 2), segment, euclid,
+                      rng, RRTOptions(step=0.1, max_iterations=150))
+    assert res.path is None and res.iterations == 150 and res.nodes > 2
+
+
+def test_shortcut_keeps_ends_validity_and_never_lengthens():
+    free, segment = wall_world()
+    rng = np.random.default_rng(3)
+    start, goal = np.array([0.1, 0.1]), np.array([0.9, 0.9])
+    path = rrt_connect(start, goal, lambda: rng.uniform(0, 1, 2), segment, euclid, rng, RRTOptions(step=0.05)).path
+    before = path_length(path, euclid)
+    short = shortcut(path, segment, euclid, np.random.default_rng(4), iterations=200)
+    assert np.array_equal(short[0], start) and np.array_equal(short[-1], goal)
+    assert all(segment(a, b) for a, b in zip(short[:-1], short[1:]))
+    assert path_length(short, euclid) <= before + 1e-12
+    # the best path goes through the gap: at least start -> gap -> goal, at most a little longer
+    best = np.linalg.norm(np.array([0.5, 0.45]) - start) + np.linalg.norm(goal - np.array([0.5, 0.55]))
+    assert path_length(short, euclid) < 1.5 * best
+
+
+def test_shortcut_of_a_zigzag_in_free_space_is_the_straight_line():
+    path = np.array([[0.0, 0.0], [0.2, 0.5], [0.4, 0.0], [0.6, 0.5], [1.0, 0.0]])
+    short = shortcut(path, lambda a, b: True, euclid, np.random.default_rng(0), iterations=200)
+    assert path_length(short, euclid) < 1.05 * 1.0
