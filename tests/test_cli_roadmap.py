@@ -174,15 +174,24 @@ def test_bad_numbers(tmp_path, option, value):
     assert not (d / "roadmap").exists()
 
 
-def test_unknown_joint_in_the_robot_groups(tmp_path):
+def scene_with_robot(tmp_path: Path, edit) -> tuple[Path, Path]:
+    """A copy of the default robot (robot.yaml edited by ``edit(dict)``) and a scene using
+    it: (scene path, robot.yaml path)."""
     r = yaml.safe_load(ROBOT_YAML.read_text())
-    r["groups"]["right_arm"] = r["groups"]["right_arm"][:-1] + ["r_arm_j99"]
+    edit(r)
     shutil.copy(ROBOT_DIR / "robot.urdf", tmp_path / "robot.urdf")
     robot_yaml = tmp_path / "robot.yaml"
     robot_yaml.write_text(yaml.safe_dump(r, sort_keys=False))
     s = scene_dict()
     s["robot"] = str(robot_yaml)
-    scene = write_scene(tmp_path / "scene.yaml", s)
+    return write_scene(tmp_path / "scene.yaml", s), robot_yaml
+
+
+def test_unknown_joint_in_the_robot_groups(tmp_path):
+    def edit(r):
+        r["groups"]["right_arm"] = r["groups"]["right_arm"][:-1] + ["r_arm_j99"]
+
+    scene, robot_yaml = scene_with_robot(tmp_path, edit)
     d = tmp_path / "cache"
     assert_one_error_line(run("--cache-dir", d, "roadmap", "build", scene, "--nodes", "4", "--jobs", "1"),
                           "r_arm_j99", "groups.right_arm", str(robot_yaml))
@@ -190,14 +199,7 @@ def test_unknown_joint_in_the_robot_groups(tmp_path):
 
 
 def test_unknown_group_in_the_robot(tmp_path):
-    r = yaml.safe_load(ROBOT_YAML.read_text())
-    r["groups"]["head"] = ["torso_yaw"]
-    shutil.copy(ROBOT_DIR / "robot.urdf", tmp_path / "robot.urdf")
-    robot_yaml = tmp_path / "robot.yaml"
-    robot_yaml.write_text(yaml.safe_dump(r, sort_keys=False))
-    s = scene_dict()
-    s["robot"] = str(robot_yaml)
-    scene = write_scene(tmp_path / "scene.yaml", s)
+    scene, robot_yaml = scene_with_robot(tmp_path, lambda r: r["groups"].update(head=["torso_yaw"]))
     line = assert_one_error_line(run("--cache-dir", tmp_path / "cache", "roadmap", "build", scene, "--nodes", "4"),
                                  "groups.head", str(robot_yaml))
     assert "torso, right_arm, left_arm" in line
