@@ -11,9 +11,6 @@ grasps kept, grasps/s and the time split between stages, as a Markdown table.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
-import shutil
 import statistics
 import sys
 import tempfile
@@ -23,6 +20,9 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from benchlib import fresh_cache, machine  # noqa: E402
 
 from regrasp_cli.grasp.build import BuildOptions, build_grasps  # noqa: E402
 
@@ -48,7 +48,7 @@ def run(scene: Path, hand: str, jobs: int, repeats: int, robot_cache: Path) -> d
         with tempfile.TemporaryDirectory() as cache:
             from regrasp_cli.grasp import build as b
 
-            shutil.copytree(robot_cache / "self_collision", Path(cache) / "self_collision")
+            fresh_cache(robot_cache, Path(cache))
             b._context.cache_clear()
             glist, rep = build_grasps(scene, Path(cache), hand, BuildOptions(jobs=jobs))
         times.append(sum(rep.seconds.values()))
@@ -68,9 +68,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--hand", default="right")
     args = ap.parse_args()
-    cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
-    print(f"machine: {cpu}, {os.cpu_count()} cores, Python {platform.python_version()}; jobs={args.jobs}, "
-          f"repeats={args.repeats}, hand={args.hand}\n")
+    print(machine(jobs=args.jobs, repeats=args.repeats, hand=args.hand) + "\n")
     cases = [("builtin:statuette", SCENE)]
     with tempfile.TemporaryDirectory() as tmp:
         robot_cache = Path(tmp) / "robot_cache"

@@ -12,9 +12,6 @@ the sizes and the collision checks per second.
 from __future__ import annotations
 
 import argparse
-import os
-import platform
-import shutil
 import statistics
 import sys
 import tempfile
@@ -22,6 +19,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from benchlib import fresh_cache, machine  # noqa: E402
 
 from regrasp_cli.roadmap.build import RoadmapOptions, build_roadmap  # noqa: E402
 from regrasp_cli.scene import load_problem  # noqa: E402
@@ -36,9 +36,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--tree", action="store_true")
     args = ap.parse_args()
-    cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
-    print(f"machine: {cpu}, {os.cpu_count()} cores, Python {platform.python_version()}; jobs={args.jobs}, "
-          f"repeats={args.repeats}, mode={'tree' if args.tree else 'graph'}\n")
+    print(machine(jobs=args.jobs, repeats=args.repeats, mode='tree' if args.tree else 'graph') + "\n")
     print("| nodes per elementary roadmap | R_r / R_l | Super Graph | wall time (s, median) | "
           "elementary / SG nodes / SG edges (s) | collision checks | checks/s |")
     print("|---|---|---|---|---|---|---|")
@@ -49,7 +47,7 @@ def main() -> None:
             runs = []
             for _ in range(args.repeats):
                 cache = Path(tmp) / f"c{n}-{len(runs)}"
-                shutil.copytree(robot_cache / "self_collision", cache / "self_collision")
+                fresh_cache(robot_cache, cache)
                 art, rep = build_roadmap(SCENE, cache, RoadmapOptions(nodes=n, tree=args.tree), args.jobs)
                 runs.append((sum(rep.seconds.values()), art, rep))
             times = [r[0] for r in runs]
