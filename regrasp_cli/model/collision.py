@@ -93,10 +93,10 @@ def cold_start(geometry_data: pin.GeometryData) -> None:
     without them coal 3.0.3's early GJK exit missed 2 in 17,548 colliding configurations
     (a palm box against a thumb cylinder, 10 mm deep); with them, none
     (scripts/bench_collision.py, docs/BENCHMARKS.md)."""
-    for req in list(geometry_data.collisionRequests) + list(geometry_data.distanceRequests):
-        req.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
-        with warnings.catch_warnings():  # deprecated in coal, but pinocchio still sets it
-            warnings.simplefilter("ignore", DeprecationWarning)
+    with warnings.catch_warnings():  # deprecated in coal, but pinocchio still sets it
+        warnings.simplefilter("ignore", DeprecationWarning)
+        for req in list(geometry_data.collisionRequests) + list(geometry_data.distanceRequests):
+            req.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
             req.enable_cached_gjk_guess = False
     for req in geometry_data.collisionRequests:
         req.enable_contact = True

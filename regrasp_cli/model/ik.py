@@ -41,7 +41,7 @@ class IKResult:
 
 def _dls(J: np.ndarray, e: np.ndarray, damping: float) -> np.ndarray:
     JJt = J @ J.T
-    JJt[np.diag_indices_from(JJt)] += damping
+    JJt.flat[::len(JJt) + 1] += damping
     return J.T @ np.linalg.solve(JJt, e)
 
 

@@ -40,3 +40,17 @@ def exchange_position(nodes: np.ndarray, anchors: np.ndarray, is_free: Callable[
         if is_free(nodes[i]):
             return nodes[i].copy(), tested
     return None, len(nodes)
+
+
+def exchange_orientation(a_right_O: np.ndarray, a_left_O: np.ndarray, d_right_W: np.ndarray,
+                         d_left_W: np.ndarray) -> np.ndarray:
+    """R_WO (3, 3) turning the hands' approach directions in the object frame (3,) as close
+    as possible (least squares, Wahba's problem) to the directions (3,) from which each
+    arm reaches the exchange point: the paper's orientation "determined by the selected
+    double grasp directions and the object position wrt. the robot torso"."""
+    from scipy.spatial.transform import Rotation
+
+    unit = lambda v: np.asarray(v, float) / max(float(np.linalg.norm(v)), 1e-12)  # noqa: E731
+    R, _ = Rotation.align_vectors(np.array([unit(d_right_W), unit(d_left_W)]),
+                                  np.array([unit(a_right_O), unit(a_left_O)]))
+    return R.as_matrix()

@@ -1,0 +1,92 @@
+"""Per-query scratch of the online planner: options, collision worlds, segment checks.
+
+The problem, the grasp lists and the roadmap are immutable inputs; a :class:`Scratch` is
+built for one `regrasp plan` run and holds what the run learns: collision worlds for each
+object placement (built once, ~35 ms each), the random generator and check counters.
+
+Segments that the roadmap did not certify (connections to key configurations, repairs,
+approach lines, finger motions) are checked densely: no joint moves more than
+``resolution`` and no robot point more than ``cartesian_step`` between two checked
+configurations (the Cartesian bound of :class:`roadmap.local.LocalPlanner`, without a
+clearance margin, since grasps touch the object and it touches its support).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
+from regrasp_cli.model.ik import IKOptions
+from regrasp_cli.roadmap.local import LocalPlanner, joint_reach
+from regrasp_cli.roadmap.rrt import RRTOptions
+from regrasp_cli.scene import Problem
+
+
+@dataclass(frozen=True)
+class OnlineOptions:
+    """Options of `regrasp plan` (metres, radians, seconds)."""
+
+    planner: str = "roadmap"  # or "rrt-connect": the single-query baseline of §VI
+    approach_distance: float = 0.08  # pre-grasp offset of the hand before it closes
+    lift_height: float = 0.06  # the object is lifted (and lowered) vertically by this
+    line_steps: int = 4  # IK waypoints of an approach, retreat or lift line
+    preshape: tuple[float, ...] = (1.0, 0.6, 0.35, 0.2)  # finger opening tried, open = 1
+    single_per_hand: int = 6  # single-grasp configurations kept per hand (§IV-B)
+    grasp_attempts: int = 40  # grasps of a list tried before giving up
+    key_samples: int = 6  # samples of the non-grasping joints per grasp (§V-C)
+    sample_sigma: float = 0.3  # rad: spread of those samples around the rest configuration
+    exchange_step: float = 0.05  # grid step of the exchange position (Fig. 6)
+    exchange_samples: int = 16  # Gaussian samples of the exchange pose per double grasp
+    exchange_sigma: float = 0.04  # m, position spread of those samples
+    exchange_angle_sigma: float = 0.15  # rad, orientation spread
+    double_grasps_tried: int = 10
+    resolution: float = 0.02  # rad: dense segment check
+    cartesian_step: float = 0.01  # m: dense segment check
+    k_connect: int = 40  # nearest Super Graph nodes tried when connecting a configuration
+    connections: int = 3  # ... until this many are joined
+    repairs: int = 30  # graph re-searches per query before RRT-Connect takes over
+    rrt: RRTOptions = RRTOptions(step=0.4, max_iterations=3000)
+    shortcut_iterations: int = 40
+    acceleration: float = 3.0  # rad/s^2 for every joint (URDFs carry no acceleration limits)
+    ik: IKOptions = IKOptions(restarts=2, max_iters=40)
+
+
+@dataclass
+class Scratch:
+    """Mutable state of one planning run."""
+
+    problem: Problem
+    options: OnlineOptions
+    rng: np.random.Generator
+    worlds: dict = field(default_factory=dict)
+    local: LocalPlanner | None = None
+
+    def __post_init__(self) -> None:
+        self.local = LocalPlanner(self.options.resolution, self.options.cartesian_step / 2,
+                                  joint_reach(self.problem.robot))
+
+    def world(self, X_PO: np.ndarray | None, attached: str | None = None, touching: tuple[str, ...] = (),
+              pair_filter=None, key: str = "") -> CollisionWorld:
+        """Self-collision + obstacles + the object at X_PO (in W, or in the grasp frame of
+        ``attached``), cached by placement; ``key`` names a ``pair_filter`` variant."""
+        k = (None if X_PO is None else np.round(X_PO, 12).tobytes(), attached, tuple(sorted(touching)), key)
+        w = self.worlds.get(k)
+        if w is None:
+            p = self.problem
+            obj = None if X_PO is None else ObjectPlacement(p.object.mesh, X_PO, attached, tuple(touching))
+            w = CollisionWorld(p.robot, p.spec.obstacles, p.disabled.links(), obj, p.collision_options,
+                               pair_filter=pair_filter)
+            self.worlds[k] = w
+        return w
+
+    def segment_free(self, world: CollisionWorld, q0: np.ndarray, q1: np.ndarray) -> bool:
+        return self.local.segment_free(world, q0, q1)
+
+    def path_free(self, world: CollisionWorld, path: np.ndarray) -> bool:
+        return all(self.segment_free(world, a, b) for a, b in zip(path[:-1], path[1:]))
+
+    @property
+    def checks(self) -> int:
+        return sum(w.n_checks for w in self.worlds.values())

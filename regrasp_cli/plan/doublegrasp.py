@@ -1,0 +1,96 @@
+"""Double grasps: Saut et al. 2010, §IV-B, scored with the robot-configuration score of §V-C.
+
+1. Each hand's grasp list is filtered against the environment at the object pose where
+   that hand works (the picking hand at the start pose, the placing hand at the goal): a
+   grasp from below collides with the support.  The test places the hand alone
+   (:mod:`plan.handshape`), no IK needed.
+2. The survivors are ranked by a cheap score (normalised quality + approach cosine) and
+   turned into single-grasp configurations (:func:`keyconf.single_configuration`) until
+   ``single_per_hand`` are found: the paper's "collision-free single grasps
+   configurations" (4 right and 7 left in its scenario).
+3. Every pair of them is tested for hand-hand collision with both hands on the object;
+   a pair's score is the normalised min of the two grasp qualities plus the normalised
+   min of the two robot-configuration scores (approach cosine minus free-arm terms).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from regrasp_cli.grasp.build import GraspList
+from regrasp_cli.plan.context import Scratch
+from regrasp_cli.plan.handshape import HandShape, StaticGeometry, hand_hits_static, hands_collide
+from regrasp_cli.plan.keyconf import SingleConfig, approach_axis, shoulder, single_configuration
+
+
+@dataclass(frozen=True)
+class SingleStats:
+    listed: int  # grasps in the list
+    environment_free: int  # after the environment filter
+    tried: int  # turned into configurations (IK + collision)
+    kept: int  # configurations found
+
+
+@dataclass(frozen=True)
+class DoubleGrasp:
+    giver: SingleConfig  # the picking hand's configuration at the start pose
+    taker: SingleConfig  # the placing hand's configuration at the goal pose
+    quality: float  # min of the two grasp qualities
+    config: float  # min of the two robot-configuration scores
+    score: float  # normalised quality + normalised config, in [0, 2]
+
+
+def _normalise(x: np.ndarray) -> np.ndarray:
+    span = float(x.max() - x.min()) if len(x) else 0.0
+    return (x - x.min()) / span if span > 1e-12 else np.ones_like(x)
+
+
+def environment_free(grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarray, env: StaticGeometry) -> np.ndarray:
+    """Indices of the grasps whose hand at X_WO @ X_OG touches no obstacle."""
+    return np.array([k for k in range(len(grasps)) if not hand_hits_static(shapes[k], X_WO @ grasps.X_OG[k], env)],
+                    dtype=int)
+
+
+def cheap_order(scratch: Scratch, grasps: GraspList, ks: np.ndarray, X_WO: np.ndarray) -> np.ndarray:
+    """``ks`` ordered by normalised grasp quality + cosine between the hand's approach and
+    the shoulder->object direction (the rest posture's shoulder)."""
+    if not len(ks):
+        return ks
+    a_G = approach_axis(scratch, grasps.hand)
+    to_obj = X_WO[:3, 3] - shoulder(scratch, grasps.hand, scratch.problem.robot.q_rest)
+    to_obj /= max(np.linalg.norm(to_obj), 1e-9)
+    cos = np.array([(X_WO[:3, :3] @ grasps.X_OG[k, :3, :3] @ a_G) @ to_obj for k in ks])
+    score = _normalise(grasps.scores[ks, 4]) + _normalise(cos)
+    return ks[np.argsort(-score, kind="stable")]
+
+
+def single_configurations(scratch: Scratch, grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarray,
+                          env: StaticGeometry) -> tuple[list[SingleConfig], SingleStats]:
+    o = scratch.options
+    ks = cheap_order(scratch, grasps, environment_free(grasps, shapes, X_WO, env), X_WO)
+    found, tried = [], 0
+    for k in ks[:o.grasp_attempts]:
+        tried += 1
+        c = single_configuration(scratch, grasps, int(k), X_WO)
+        if c is not None:
+            found.append(c)
+            if len(found) >= o.single_per_hand:
+                break
+    return found, SingleStats(len(grasps), len(ks), tried, len(found))
+
+
+def double_grasps(giver: list[SingleConfig], giver_list: GraspList, giver_shapes: list[HandShape],
+                  taker: list[SingleConfig], taker_list: GraspList, taker_shapes: list[HandShape]) -> list[DoubleGrasp]:
+    """Pairs without hand-hand collision, best score first."""
+    pairs = [(a, b) for a in giver for b in taker
+             if not hands_collide(giver_shapes[a.grasp], giver_list.X_OG[a.grasp],
+                                  taker_shapes[b.grasp], taker_list.X_OG[b.grasp])]
+    if not pairs:
+        return []
+    quality = np.array([min(giver_list.scores[a.grasp, 4], taker_list.scores[b.grasp, 4]) for a, b in pairs])
+    config = np.array([min(a.score, b.score) for a, b in pairs])
+    score = _normalise(quality) + _normalise(config)
+    order = np.argsort(-score, kind="stable")
+    return [DoubleGrasp(pairs[i][0], pairs[i][1], float(quality[i]), float(config[i]), float(score[i])) for i in order]

@@ -1,0 +1,127 @@
+"""A hand's collision geometry in its grasp frame G, for tests that do not need the arm.
+
+The double-grasp filters of Saut et al. 2010 §IV-B test a hand placed at a grasp against
+the environment (at the object's start or goal pose) and against the other hand (both
+holding the object): only the palm and fingers matter there, and placing them directly
+(object pose x grasp) is far cheaper than solving the arm's IK first.  Geometries are
+checked with coal after a vectorised bounding-sphere test, which rejects almost every
+pair at these distances.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import pinocchio as pin
+
+from regrasp_cli.config import ObstacleSpec
+from regrasp_cli.model.collision import obstacle_geometry
+from regrasp_cli.model.robot import Robot
+from regrasp_cli.spatial import inverse
+
+
+@dataclass(frozen=True)
+class HandShape:
+    """The palm and finger geometries of a hand with its fingers at given values."""
+
+    geometries: tuple[coal.CollisionGeometry, ...]
+    X_GL: np.ndarray  # (n, 4, 4) geometry poses in the grasp frame G
+    centres: np.ndarray  # (n, 3) bounding-sphere centres in G, m
+    radii: np.ndarray  # (n,) bounding-sphere radii, m
+
+
+def palm_and_finger_links(robot: Robot, hand: str) -> set[str]:
+    """Names of the links of the palm and fingers of a hand."""
+    h, model = robot.hands[hand], robot.model
+    joints = {model.getJointId(robot.joint_names[i]) for i in h.idx} | {model.frames[h.grasp_frame].parentJoint}
+    return {model.frames[go.parentFrame].name for go in robot.collision_model.geometryObjects
+            if go.parentJoint in joints}
+
+
+def hand_shapes(robot: Robot, hand: str, finger_values: np.ndarray) -> list[HandShape]:
+    """The hand's geometries posed in G, for each row of finger values (k, n_hand_joints)."""
+    h, model = robot.hands[hand], robot.model
+    data, gm = model.createData(), robot.collision_model
+    gd = gm.createData()
+    joints = {model.getJointId(robot.joint_names[i]) for i in h.idx} | {model.frames[h.grasp_frame].parentJoint}
+    ids = [g for g, go in enumerate(gm.geometryObjects) if go.parentJoint in joints]
+    geoms = tuple(gm.geometryObjects[g].geometry for g in ids)
+    for g in geoms:
+        g.computeLocalAABB()
+    c_L = np.array([g.aabb_local.center() for g in geoms])
+    radii = np.array([float(g.aabb_radius) for g in geoms])
+    q = robot.q_rest.copy()
+    out = []
+    for values in np.atleast_2d(finger_values):
+        q[h.idx] = values
+        pin.framesForwardKinematics(model, data, robot.to_pin(q))
+        pin.updateGeometryPlacements(model, data, gm, gd)
+        X_GW = inverse(data.oMf[h.grasp_frame].homogeneous)
+        X = np.array([X_GW @ gd.oMg[g].homogeneous for g in ids])
+        centres = np.einsum("nij,nj->ni", X[:, :3, :3], c_L) + X[:, :3, 3]
+        out.append(HandShape(geoms, X, centres, radii))
+    return out
+
+
+def _tf(X: np.ndarray) -> coal.Transform3s:
+    return coal.Transform3s(X[:3, :3].copy(), X[:3, 3].copy())
+
+
+def _collide(g1, X1: np.ndarray, g2, X2: np.ndarray) -> bool:
+    req, res = coal.CollisionRequest(), coal.CollisionResult()
+    req.enable_contact = True
+    return coal.collide(g1, _tf(X1), g2, _tf(X2), req, res) > 0
+
+
+@dataclass(frozen=True)
+class StaticGeometry:
+    """Obstacles as coal geometries with world poses and bounding spheres."""
+
+    geometries: tuple[coal.CollisionGeometry, ...]
+    X_W: np.ndarray  # (m, 4, 4)
+    centres: np.ndarray  # (m, 3)
+    radii: np.ndarray  # (m,)
+
+
+def static_geometry(obstacles: tuple[ObstacleSpec, ...]) -> StaticGeometry:
+    geoms, poses, centres, radii = [], [], [], []
+    for ob in obstacles:
+        g = obstacle_geometry(ob)
+        g.computeLocalAABB()
+        geoms.append(g)
+        poses.append(ob.X_WO)
+        centres.append(ob.X_WO[:3, :3] @ g.aabb_local.center() + ob.X_WO[:3, 3])
+        radii.append(float(g.aabb_radius))
+    return StaticGeometry(tuple(geoms), np.array(poses).reshape(-1, 4, 4), np.array(centres).reshape(-1, 3),
+                          np.array(radii))
+
+
+def hand_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry, clearance: float = 0.0) -> bool:
+    """Does the hand at X_WG (4, 4) touch an obstacle (or come within ``clearance``)?"""
+    if not len(env.geometries):
+        return False
+    c = shape.centres @ X_WG[:3, :3].T + X_WG[:3, 3]
+    d = np.linalg.norm(c[:, None] - env.centres[None], axis=2)
+    near = np.argwhere(d <= shape.radii[:, None] + env.radii[None] + clearance)
+    for a, b in near:
+        X = X_WG @ shape.X_GL[a]
+        if clearance > 0:
+            req, res = coal.DistanceRequest(), coal.DistanceResult()
+            if coal.distance(shape.geometries[a], _tf(X), env.geometries[b], _tf(env.X_W[b]), req, res) < clearance:
+                return True
+        elif _collide(shape.geometries[a], X, env.geometries[b], env.X_W[b]):
+            return True
+    return False
+
+
+def hands_collide(a: HandShape, X_OGa: np.ndarray, b: HandShape, X_OGb: np.ndarray) -> bool:
+    """Do two hands holding the same object (grasps X_OG of each, (4, 4)) collide?"""
+    X_GaGb = inverse(X_OGa) @ X_OGb
+    cb = b.centres @ X_GaGb[:3, :3].T + X_GaGb[:3, 3]
+    d = np.linalg.norm(a.centres[:, None] - cb[None], axis=2)
+    for i, j in np.argwhere(d <= a.radii[:, None] + b.radii[None]):
+        if _collide(a.geometries[i], a.X_GL[i], b.geometries[j], X_GaGb @ b.X_GL[j]):
+            return True
+    return False

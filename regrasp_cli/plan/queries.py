@@ -1,0 +1,228 @@
+"""The four queries of §V-B through the Super Graph, with lazy revalidation and repair.
+
+"First the query is executed in the precomputed roadmap disregarding the collisions of
+the existing nodes and edges in the graph.  Once a path is found, each local path
+composing it is checked for collision against the manipulated object ... If a collision
+is detected ... an alternative path ... is then searched in the precomputed graph.  If no
+solution is found, local reconnections are computed using RRT-like planners."
+(Saut et al. 2010, §V-B; the lazy scheme of their reference [22].)
+
+Here a query runs between two configurations of one phase: the Super Graph's nodes get
+the phase's finger values (a holding hand is closed on the object; roadmaps were built
+with open hands), the two ends are joined to their nearest free nodes, and the shortest
+path is revalidated edge by edge against what the roadmap did not check: the object
+(static, or attached to the holding hand) and the links of a hand whose fingers are not
+open.  Invalid nodes and edges are hidden in a per-query memo and the graph is searched
+again; after ``repairs`` searches, or when the ends lie in different components, the
+broken portion is bridged by RRT-Connect between the free configurations bounding it.
+The result is shortcut and returned with the Table I statistics of the query.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import networkx as nx
+import numpy as np
+
+from regrasp_cli.model.collision import CollisionWorld
+from regrasp_cli.plan.context import Scratch
+from regrasp_cli.roadmap.build import RoadmapArtefact
+from regrasp_cli.roadmap.local import distance
+from regrasp_cli.roadmap.query import QueryMemo, connect, shortest_path
+from regrasp_cli.roadmap.rrt import rrt_connect, shortcut
+
+
+@dataclass
+class QueryStats:
+    """Table I per phase: nodes (roadmap nodes on the path + RRT tree nodes), planning
+    time (search, connections, repairs, smoothing) and validation time (lazy checks)."""
+
+    nodes: int = 0
+    planning: float = 0.0
+    validation: float = 0.0
+    searches: int = 0
+    invalid_edges: int = 0
+    rrt_calls: int = 0
+
+
+class QueryFailed(Exception):
+    """A query found no path within its budget."""
+
+
+@dataclass(frozen=True)
+class Roadmap:
+    """The Super Graph ready for queries (built once per run)."""
+
+    graph: nx.Graph
+    nodes: np.ndarray  # (m, nq) with open hands
+    weights: np.ndarray  # (nq,)
+
+    @classmethod
+    def of(cls, art: RoadmapArtefact) -> "Roadmap":
+        return cls(art.networkx(), art.graph.nodes, art.weights)
+
+
+@dataclass(frozen=True)
+class PhaseWorlds:
+    """Collision worlds of a phase: ``full`` checks everything (uncertified segments),
+    ``lazy`` only what the roadmap did not (its nodes and edges)."""
+
+    full: CollisionWorld
+    lazy: CollisionWorld
+    fingers: dict  # hand -> finger values during the phase
+
+
+def _with_fingers(scratch: Scratch, q: np.ndarray, fingers: dict) -> np.ndarray:
+    q = q.copy()
+    for hand, values in fingers.items():
+        q[scratch.problem.robot.hands[hand].idx] = values
+    return q
+
+
+def _rrt(scratch: Scratch, a: np.ndarray, b: np.ndarray, world: CollisionWorld, fingers: dict,
+         weights: np.ndarray) -> tuple[np.ndarray | None, int]:
+    robot = scratch.problem.robot
+    moving = np.concatenate([robot.groups["torso"], robot.groups["right_arm"], robot.groups["left_arm"]])
+
+    def sample():
+        return _with_fingers(scratch, robot.sample(scratch.rng, moving, base=a), fingers)
+
+    res = rrt_connect(a, b, sample, lambda x, y: scratch.segment_free(world, x, y),
+                      lambda x, ys: distance(x, ys, weights), scratch.rng, scratch.options.rrt)
+    return res.path, res.nodes
+
+
+def _detours(scratch: Scratch, q: np.ndarray) -> list[np.ndarray]:
+    """q with one arm, then both arms, then the torso too, moved back to rest."""
+    robot = scratch.problem.robot
+    out = []
+    for groups in (("right_arm",), ("left_arm",), ("right_arm", "left_arm"), ("torso", "right_arm", "left_arm")):
+        m = q.copy()
+        for g in groups:
+            m[robot.groups[g]] = robot.q_rest[robot.groups[g]]
+        if not np.array_equal(m, q):
+            out.append(m)
+    return out
+
+
+def smooth(scratch: Scratch, path: np.ndarray, world: CollisionWorld, weights: np.ndarray) -> np.ndarray:
+    return shortcut(path, lambda x, y: scratch.segment_free(world, x, y), lambda x, y: distance(x, y, weights),
+                    scratch.rng, scratch.options.shortcut_iterations)
+
+
+def rrt_query(scratch: Scratch, a: np.ndarray, b: np.ndarray, worlds: PhaseWorlds, weights: np.ndarray,
+              stats: QueryStats) -> np.ndarray:
+    """The single-query baseline: RRT-Connect from a to b, then shortcut."""
+    t0 = time.perf_counter()
+    path, n = _rrt(scratch, a, b, worlds.full, worlds.fingers, weights)
+    stats.rrt_calls += 1
+    stats.nodes += n
+    if path is None:
+        stats.planning += time.perf_counter() - t0
+        raise QueryFailed(f"RRT-Connect found no path in {scratch.options.rrt.max_iterations} iterations")
+    path = smooth(scratch, path, worlds.full, weights)
+    stats.planning += time.perf_counter() - t0
+    return path
+
+
+def roadmap_query(scratch: Scratch, rm: Roadmap, a: np.ndarray, b: np.ndarray, worlds: PhaseWorlds,
+                  stats: QueryStats) -> np.ndarray:
+    """A collision-free path (k, nq) from a to b (both free in ``worlds.full``)."""
+    o = scratch.options
+    t_start = time.perf_counter()
+    validation = 0.0
+    full, lazy = worlds.full, worlds.lazy
+    if scratch.segment_free(full, a, b):
+        stats.planning += time.perf_counter() - t_start
+        return np.array([a, b])
+    memo = QueryMemo()
+    node = {}  # node index -> configuration with the phase's fingers
+
+    def q_of(i: int) -> np.ndarray:
+        if i not in node:
+            node[i] = _with_fingers(scratch, rm.nodes[i], worlds.fingers)
+        return node[i]
+
+    def node_free(i: int) -> bool:
+        nonlocal validation
+        if i in memo.invalid_nodes:
+            return False
+        t = time.perf_counter()
+        ok = lazy.is_free(q_of(i))
+        validation += time.perf_counter() - t
+        if not ok:
+            memo.invalid_nodes.add(i)
+        return ok
+
+    def ends(q: np.ndarray) -> list[tuple[int, float]]:
+        d = distance(q, rm.nodes, rm.weights)
+        out = []
+        for i in np.argsort(d, kind="stable")[:o.k_connect]:
+            i = int(i)
+            if node_free(i) and scratch.segment_free(full, q, q_of(i)):
+                out.append((i, float(d[i])))
+                if len(out) >= o.connections:
+                    break
+        return out
+
+    def attach(q: np.ndarray) -> tuple[list[np.ndarray], list[tuple[int, float]]]:
+        """Configurations leading from q to the graph, and the nodes they join."""
+        e = ends(q)
+        if e:
+            return [], e
+        for mid in _detours(scratch, q):  # e.g. the hand that just let go back at rest
+            if full.is_free(mid) and scratch.segment_free(full, q, mid):
+                e = ends(mid)
+                if e:
+                    return [mid], e
+        d = distance(q, rm.nodes, rm.weights)
+        for i in [int(i) for i in np.argsort(d, kind="stable")[:o.k_connect] if node_free(int(i))][:2]:
+            bridge, n = _rrt(scratch, q, q_of(i), full, worlds.fingers, rm.weights)
+            stats.rrt_calls += 1
+            stats.nodes += n
+            if bridge is not None:
+                return list(bridge[1:-1]), [(i, 0.0)]
+        return [], []
+
+    (pre_a, src), (pre_b, dst) = attach(a), attach(b)
+    path = None
+    for _ in range(o.repairs):
+        stats.searches += 1
+        ids = shortest_path(rm.graph, src, dst, memo) if src and dst else None
+        if ids is None:
+            break
+        bad = None
+        for u, v in zip(ids[:-1], ids[1:]):
+            e = frozenset((u, v))
+            if e in memo.valid_edges:
+                continue
+            t = time.perf_counter()
+            ok = node_free(u) and node_free(v) and scratch.segment_free(lazy, q_of(u), q_of(v))
+            validation += time.perf_counter() - t
+            if ok:
+                memo.valid_edges.add(e)
+            else:
+                memo.invalid_edges.add(e)
+                stats.invalid_edges += 1
+                bad = (u, v)
+                break
+        if bad is None:
+            path = np.array([a, *pre_a] + [q_of(i) for i in ids] + [*pre_b[::-1], b])
+            stats.nodes += len(ids)
+            break
+    if path is None:  # bridge with RRT-Connect between the ends (different components)
+        bridge, n = _rrt(scratch, a, b, full, worlds.fingers, rm.weights)
+        stats.rrt_calls += 1
+        stats.nodes += n
+        if bridge is None:
+            stats.planning += time.perf_counter() - t_start - validation
+            stats.validation += validation
+            raise QueryFailed(f"no path in the roadmap after {stats.searches} searches and RRT-Connect found none "
+                              f"in {o.rrt.max_iterations} iterations")
+        path = bridge
+    path = smooth(scratch, path, full, rm.weights)
+    stats.planning += time.perf_counter() - t_start - validation
+    stats.validation += validation
+    return path

@@ -1,0 +1,414 @@
+"""The plan checker (regrasp_cli.validate) on synthetic plans of the default scene.
+
+The plan is built here, not by the planner: the right hand takes the statuette with a
+grasp of the project's grasp search (its object placed where that grasp puts it, in front
+of the robot at rest), carries it a little, lets go and moves back.  The valid plan must
+pass; each test breaks one thing and expects the matching issue (or InputError).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from rich.console import Console
+
+from regrasp_cli.errors import InputError, StaleArtefactError
+from regrasp_cli.grasp.frames import grasp_frames
+from regrasp_cli.grasp.single import GraspOptions, HandModel, grasp_for_frame
+from regrasp_cli.grasp.surface import build_surface, sampling_step
+from regrasp_cli.grasp.workspace import hand_workspace
+from regrasp_cli.model.collision import ObjectPlacement
+from regrasp_cli.plan.timing import time_parameterise
+from regrasp_cli.spatial import inverse
+from regrasp_cli.store import sha256_file
+from regrasp_cli.trajectory import Phase, Plan, PlanGrasp, plan_to_dict, write_plan
+from regrasp_cli.validate import ValidationReport, print_validation, validate_plan
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOT_DIR = ROOT / "configs" / "robots" / "humanoid43"
+SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
+HAND = "right"
+
+
+# ------------------------------------------------------------------ a synthetic plan
+
+
+def _joint(robot, q, **values):
+    q = q.copy()
+    for name, v in values.items():
+        q[robot.joint_names.index(name)] = v
+    return q
+
+
+@pytest.fixture(scope="module")
+def held(problem):
+    """(grasp, q_grasp): a force-closure grasp of the right hand and the robot at rest
+    with those fingers closed, such that closing the fingers on the object placed there
+    is collision free in the scene."""
+    robot = problem.robot
+    h = robot.hands[HAND]
+    ws = hand_workspace(robot, HAND)
+    surface = build_surface(problem.object.mesh, sampling_step(min(f.tip_radius for f in h.spec.fingers)),
+                            np.random.default_rng(0))
+    hm = HandModel(robot, HAND, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance)
+    rho = float(np.linalg.norm(problem.object.extents) / 2)
+    for i, X_OG in enumerate(grasp_frames(problem.object.mesh.bounds, 8, 256)):
+        g, _ = grasp_for_frame(hm, ws, surface, X_OG, i, problem.spec.object.friction, rho, GraspOptions())
+        if g is None:
+            continue
+        q = problem.q_start.copy()
+        q[h.idx] = g.finger_q
+        X_WO = robot.fk(q, h.grasp_frame) @ inverse(g.X_OG)
+        world = problem.world(ObjectPlacement(problem.object.mesh, X_WO, None, (HAND,)))
+        if world.segment_free(problem.q_start, q, 0.005):
+            return g, q
+    pytest.fail("no usable grasp in the first 256 x 8 grasp frames")
+
+
+def _motion(problem, q_grasp) -> list[tuple[str, tuple[str, ...], tuple[str, ...], np.ndarray]]:
+    """(name, holding, touching, waypoints) of each phase."""
+    robot = problem.robot
+    h = robot.hands[HAND]
+    q_open = problem.q_start
+    q_mid = _joint(robot, q_grasp, r_arm_j1=q_grasp[robot.joint_names.index("r_arm_j1")] + 0.1)
+    q_moved = _joint(robot, q_mid, r_arm_j2=q_mid[robot.joint_names.index("r_arm_j2")] - 0.15)
+    q_released = q_moved.copy()
+    q_released[h.idx] = h.open
+    q_back = _joint(robot, q_released, l_arm_j1=-0.5, l_arm_j2=0.4)
+    return [("close_right", (), (HAND,), np.array([q_open, q_grasp])),
+            ("carry", (HAND,), (), np.array([q_grasp, q_mid, q_moved])),
+            ("open_right", (), (HAND,), np.array([q_moved, q_released])),
+            ("rest", (), (), np.array([q_released, q_back, q_released]))]
+
+
+def _phases(motion, velocity, acceleration) -> tuple[Phase, ...]:
+    """Phases timed stop-at-every-waypoint, each starting when the previous one ends."""
+    out, t0 = [], 0.0
+    for name, holding, touching, wp in motion:
+        times = t0 + time_parameterise(wp, velocity, acceleration)
+        out.append(Phase(name, holding, touching, wp, times))
+        t0 = float(times[-1])
+    return tuple(out)
+
+
+@pytest.fixture(scope="module")
+def base_plan(problem, held) -> Plan:
+    """The valid plan; its files (robot/, statuette.stl) are put beside it by :func:`plan_dir`."""
+    robot = problem.robot
+    g, q_grasp = held
+    h = robot.hands[HAND]
+    velocity, acceleration = robot.velocity, 2.0 * robot.velocity
+    motion = _motion(problem, q_grasp)
+    X_WO_start = robot.fk(q_grasp, h.grasp_frame) @ inverse(g.X_OG)
+    X_WO_end = robot.fk(motion[1][3][-1], h.grasp_frame) @ inverse(g.X_OG)
+    fingers = [f.name for f in h.spec.fingers]
+    contacts = tuple({"finger": fingers[f], "point": g.points[f], "normal": g.normals[f]}
+                     for f in np.flatnonzero(g.in_contact))
+    grasp = PlanGrasp(HAND, 0, g.X_OG, h.spec.joints, g.finger_q, contacts, g.scores.total)
+    obstacles = tuple({"name": o.name, "shape": o.shape, "size": list(o.size), "pose": o.X_WO, "mesh": None}
+                      for o in problem.spec.obstacles)
+    stl = problem.object.to_stl_bytes()
+    return Plan(
+        status="solved", failure=None,
+        scene={"file": str(SCENE_YAML), "sha256": sha256_file(SCENE_YAML)},
+        robot={"urdf": "robot/robot.urdf", "urdf_sha256": sha256_file(ROBOT_DIR / "robot.urdf"),
+               "robot_yaml": "robot/robot.yaml", "robot_yaml_sha256": sha256_file(ROBOT_DIR / "robot.yaml")},
+        joint_names=robot.joint_names,
+        limits={"lower": robot.lower, "upper": robot.upper, "velocity": velocity, "acceleration": acceleration},
+        object={"name": "builtin:statuette", "mesh": "statuette.stl", "sha256": hashlib.sha256(stl).hexdigest(),
+                "friction": problem.spec.object.friction},
+        obstacles=obstacles,
+        collision={"contact_tolerance": 0.002, "support_tolerance": 0.002,
+                   "disabled_pairs": sorted(problem.disabled.links())},
+        grasps=(grasp,),
+        object_poses={"start": X_WO_start, "exchange": X_WO_end, "goal": X_WO_end},
+        phases=_phases(motion, velocity, acceleration),
+    )
+
+
+@pytest.fixture
+def plan_dir(tmp_path, problem) -> Path:
+    """A directory with the robot files and the object STL the plan names (relative)."""
+    shutil.copytree(ROBOT_DIR, tmp_path / "robot")
+    (tmp_path / "statuette.stl").write_bytes(problem.object.to_stl_bytes())
+    return tmp_path
+
+
+def _write(plan_dir: Path, plan: Plan) -> Path:
+    path = plan_dir / "plan.json"
+    write_plan(path, plan)
+    return path
+
+
+def _write_dict(plan_dir: Path, d: dict) -> Path:
+    path = plan_dir / "plan.json"
+    path.write_text(json.dumps(d))
+    return path
+
+
+def _with_waypoint(plan: Plan, phase: str, i: int, q: np.ndarray, retime: bool = True) -> Plan:
+    """``plan`` with waypoint i of ``phase`` replaced by q (times recomputed unless not ``retime``)."""
+    phases = []
+    for p in plan.phases:
+        wp = p.waypoints.copy()
+        if p.name == phase:
+            wp[i] = q
+        phases.append(replace(p, waypoints=wp))
+    if retime:
+        v, a = np.asarray(plan.limits["velocity"]), np.asarray(plan.limits["acceleration"])
+        phases = _phases([(p.name, p.holding, p.touching, p.waypoints) for p in phases], v, a)
+    return replace(plan, phases=tuple(phases))
+
+
+def _checks(report: ValidationReport) -> set[str]:
+    return {i.check for i in report.issues}
+
+
+def _phase(plan: Plan, name: str) -> Phase:
+    return next(p for p in plan.phases if p.name == name)
+
+
+# ------------------------------------------------------------------ the valid plan
+
+
+def test_valid_plan_is_valid(plan_dir, base_plan):
+    report = validate_plan(_write(plan_dir, base_plan))
+    assert report.issues == ()
+    assert report.valid
+    # every segment sampled at least at its ends, and more finely where it moves
+    n_segments = sum(len(p.waypoints) - 1 for p in base_plan.phases)
+    assert report.configurations_checked > n_segments + len(base_plan.phases)
+    assert set(report.seconds) == {p.name for p in base_plan.phases} | {"grasps"}
+    assert [s.waypoints for s in report.phases] == [len(p.waypoints) for p in base_plan.phases]
+
+
+def test_absolute_paths_are_accepted(plan_dir, base_plan):
+    robot = {**base_plan.robot, "urdf": str(plan_dir / "robot" / "robot.urdf"),
+             "robot_yaml": str(plan_dir / "robot" / "robot.yaml")}
+    plan = replace(base_plan, robot=robot, object={**base_plan.object, "mesh": str(plan_dir / "statuette.stl")})
+    assert validate_plan(_write(plan_dir, plan)).valid
+
+
+def test_finer_sampling_checks_more_configurations(plan_dir, base_plan):
+    path = _write(plan_dir, base_plan)
+    coarse = validate_plan(path, resolution=0.05, cartesian_step=0.05)
+    fine = validate_plan(path, resolution=0.005, cartesian_step=0.0025)
+    assert coarse.valid and fine.valid
+    assert fine.configurations_checked > 2 * coarse.configurations_checked
+
+
+def test_mesh_obstacle_relative_to_the_plan(plan_dir, base_plan):
+    trimesh.creation.box(extents=[0.2, 0.2, 0.2]).export(plan_dir / "crate.stl")
+    X = np.eye(4)
+    X[:3, 3] = [-1.0, 0.0, 0.1]  # behind the robot
+    crate = {"name": "crate", "shape": "mesh", "size": [1.0], "pose": X, "mesh": "crate.stl"}
+    plan = replace(base_plan, obstacles=(*base_plan.obstacles, crate))
+    path = _write(plan_dir, plan)
+    assert validate_plan(path).valid
+    (plan_dir / "crate.stl").unlink()
+    with pytest.raises(InputError) as exc:
+        validate_plan(path)
+    assert exc.value.field == f"obstacles[{len(base_plan.obstacles)}].mesh"
+
+
+def test_print_validation(plan_dir, base_plan, problem):
+    console = Console(record=True, width=120)
+    print_validation(validate_plan(_write(plan_dir, base_plan)), console)
+    text = console.export_text()
+    assert "carry" in text and "grasps" in text
+    assert text.strip().splitlines()[-1] == "valid"
+
+    q = _joint(problem.robot, _phase(base_plan, "rest").waypoints[1], torso_yaw=0.7)
+    console = Console(record=True, width=200)
+    report = validate_plan(_write(plan_dir, _with_waypoint(base_plan, "rest", 1, q)))
+    print_validation(report, console)
+    text = console.export_text()
+    assert "torso_yaw" in text
+    assert text.strip().splitlines()[-1] == f"INVALID: {len(report.issues)} issue" + "s" * (len(report.issues) > 1)
+
+
+# ------------------------------------------------------------------ broken motions
+
+
+def test_waypoint_in_the_desk_is_a_collision(plan_dir, base_plan, problem):
+    # leaning forward takes the hands down through the desk top (z = 0.74) in front of the robot
+    q = _joint(problem.robot, _phase(base_plan, "rest").waypoints[1], torso_pitch1=0.6)
+    assert problem.robot.fk(q, problem.robot.hands[HAND].grasp_frame)[2, 3] < 0.74
+    report = validate_plan(_write(plan_dir, _with_waypoint(base_plan, "rest", 1, q)))
+    hits = [i for i in report.issues if i.check == "collision"]
+    assert hits and all(i.phase == "rest" for i in hits)
+    assert any("desk_top" in i.message for i in hits)
+    assert _checks(report) == {"collision"}
+
+
+def test_jump_without_retiming_is_a_timing_issue(plan_dir, base_plan, problem):
+    wp = _phase(base_plan, "rest").waypoints[1]
+    q = _joint(problem.robot, wp, l_arm_j1=wp[problem.robot.joint_names.index("l_arm_j1")] + 0.4)
+    report = validate_plan(_write(plan_dir, _with_waypoint(base_plan, "rest", 1, q, retime=False)))
+    timing = [i for i in report.issues if i.check == "timing"]
+    assert {(i.phase, i.waypoint) for i in timing} == {("rest", 1), ("rest", 2)}
+
+
+def test_times_must_start_at_zero_and_join_up(plan_dir, base_plan):
+    phases = list(base_plan.phases)
+    phases[0] = replace(phases[0], times=phases[0].times + 0.5)  # also leaves a gap to phase 1
+    report = validate_plan(_write(plan_dir, replace(base_plan, phases=tuple(phases))))
+    starts = {(i.phase, i.waypoint) for i in report.issues if i.check == "timing"}
+    assert starts == {("close_right", 0), ("carry", 0)}
+
+
+def test_joint_beyond_its_limit(plan_dir, base_plan, problem):
+    q = _joint(problem.robot, _phase(base_plan, "rest").waypoints[1], torso_yaw=0.6)  # limit 0.5
+    report = validate_plan(_write(plan_dir, _with_waypoint(base_plan, "rest", 1, q)))
+    limits = [i for i in report.issues if i.check == "limits"]
+    assert len(limits) == 1 and limits[0].waypoint == 1 and "torso_yaw" in limits[0].message
+
+
+def test_discontinuity_between_phases(plan_dir, base_plan, problem):
+    wp = _phase(base_plan, "rest").waypoints[0]
+    q = _joint(problem.robot, wp, l_arm_j1=wp[problem.robot.joint_names.index("l_arm_j1")] + 0.05)
+    report = validate_plan(_write(plan_dir, _with_waypoint(base_plan, "rest", 0, q)))
+    assert [(i.check, i.phase, i.waypoint) for i in report.issues] == [("continuity", "rest", 0)]
+
+
+# ------------------------------------------------------------------ object and grasp
+
+
+def test_grasp_contact_off_the_surface(plan_dir, base_plan):
+    g = base_plan.grasps[0]
+    c0 = dict(g.contacts[0])
+    c0["point"] = np.asarray(c0["point"]) + 0.01 * np.asarray(c0["normal"])
+    plan = replace(base_plan, grasps=(replace(g, contacts=(c0, *g.contacts[1:])),))
+    report = validate_plan(_write(plan_dir, plan))
+    off = [i for i in report.issues if i.check == "grasp" and "off the object surface" in i.message]
+    assert len(off) == 1 and c0["finger"] in off[0].message
+    # the fingertip no longer sits on the moved contact either
+    assert any(i.check == "grasp" and i.phase == "carry" and "fingertip" in i.message for i in report.issues)
+
+
+def test_contacts_that_are_not_force_closure(plan_dir, base_plan):
+    g = base_plan.grasps[0]
+    plan = replace(base_plan, grasps=(replace(g, contacts=g.contacts[:1]),))  # one contact
+    report = validate_plan(_write(plan_dir, plan))
+    assert [i.check for i in report.issues] == ["grasp"] and "force closure" in report.issues[0].message
+
+
+def test_contact_normal_must_follow_the_surface(plan_dir, base_plan):
+    g = base_plan.grasps[0]
+    c0 = dict(g.contacts[0])
+    c0["normal"] = -np.asarray(c0["normal"])  # inward
+    plan = replace(base_plan, grasps=(replace(g, contacts=(c0, *g.contacts[1:])),))
+    report = validate_plan(_write(plan_dir, plan))
+    assert any(i.check == "grasp" and "off the surface normal" in i.message for i in report.issues)
+
+
+def test_grasp_that_does_not_match_the_object_pose(plan_dir, base_plan):
+    g = base_plan.grasps[0]
+    X_OG = g.X_OG.copy()
+    X_OG[:3, 3] += [0.005, 0.0, 0.0]
+    report = validate_plan(_write(plan_dir, replace(base_plan, grasps=(replace(g, X_OG=X_OG),))))
+    assert [(i.check, i.phase, i.waypoint) for i in report.issues] == [("attachment", "carry", 0)]
+
+
+def test_fingers_must_stay_closed_while_holding(plan_dir, base_plan, problem):
+    h = problem.robot.hands[HAND]
+    q = _phase(base_plan, "carry").waypoints[1].copy()
+    q[h.idx[1]] += 0.05  # the thumb opens a little on the way
+    report = validate_plan(_write(plan_dir, _with_waypoint(base_plan, "carry", 1, q)))
+    assert ("attachment", "carry", 1) in {(i.check, i.phase, i.waypoint) for i in report.issues}
+
+
+def test_holding_hand_needs_a_grasp(plan_dir, base_plan):
+    report = validate_plan(_write(plan_dir, replace(base_plan, grasps=())))
+    assert [(i.check, i.phase) for i in report.issues] == [("attachment", "carry")]
+
+
+def test_object_must_reach_its_goal_and_exchange(plan_dir, base_plan):
+    poses = dict(base_plan.object_poses)
+    poses["goal"] = poses["goal"].copy()
+    poses["goal"][2, 3] += 0.01
+    poses["exchange"] = poses["start"]
+    report = validate_plan(_write(plan_dir, replace(base_plan, object_poses=poses)))
+    found = {(i.phase, i.message.split(" away from ")[-1]) for i in report.issues if i.check == "attachment"}
+    assert found == {("carry", "the exchange pose"), ("rest", "its goal pose")}
+
+
+# ------------------------------------------------------------------ input errors
+
+
+def test_changed_urdf_is_stale(plan_dir, base_plan):
+    path = _write(plan_dir, base_plan)
+    with (plan_dir / "robot" / "robot.urdf").open("a") as f:
+        f.write("<!-- edited -->\n")
+    with pytest.raises(StaleArtefactError, match="stale") as exc:
+        validate_plan(path)
+    assert exc.value.field == "robot.urdf"
+
+
+@pytest.mark.parametrize("section, key", [("robot", "urdf_sha256"), ("object", "sha256")])
+def test_recorded_sha_mismatch_is_stale(plan_dir, base_plan, section, key):
+    d = plan_to_dict(base_plan)
+    d[section][key] = "0" * 64
+    with pytest.raises(InputError, match="stale") as exc:
+        validate_plan(_write_dict(plan_dir, d))
+    assert exc.value.field == ("robot.urdf" if section == "robot" else "object.mesh")
+
+
+def test_changed_object_mesh_is_stale(plan_dir, base_plan):
+    path = _write(plan_dir, base_plan)
+    (plan_dir / "statuette.stl").write_bytes((plan_dir / "statuette.stl").read_bytes()[:-50])
+    with pytest.raises(InputError, match="stale"):
+        validate_plan(path)
+
+
+def test_missing_file_is_an_input_error(plan_dir, base_plan):
+    path = _write(plan_dir, base_plan)
+    (plan_dir / "statuette.stl").unlink()
+    with pytest.raises(InputError, match="no such file") as exc:
+        validate_plan(path)
+    assert exc.value.field == "object.mesh"
+
+
+def test_malformed_json_is_an_input_error(plan_dir):
+    path = plan_dir / "plan.json"
+    path.write_text('{"format": "regrasp.plan/1", ')
+    with pytest.raises(InputError, match="not valid JSON"):
+        validate_plan(path)
+
+
+@pytest.mark.parametrize("field", ["joint_names", "phases[1].times", "obstacles[0].pose", "limits.acceleration",
+                                   "grasps[0].contacts[0].normal", "object_poses.goal"])
+def test_missing_field_is_named(plan_dir, base_plan, field):
+    d = plan_to_dict(base_plan)
+    *parents, last = field.replace("[", ".").replace("]", "").split(".")
+    node = d
+    for k in parents:
+        node = node[int(k)] if k.isdigit() else node[k]
+    del node[last]
+    with pytest.raises(InputError) as exc:
+        validate_plan(_write_dict(plan_dir, d))
+    assert exc.value.field == field
+
+
+def test_joint_names_must_be_the_robots(plan_dir, base_plan):
+    names = list(base_plan.joint_names)
+    names[0], names[1] = names[1], names[0]
+    with pytest.raises(InputError) as exc:
+        validate_plan(_write(plan_dir, replace(base_plan, joint_names=tuple(names))))
+    assert exc.value.field == "joint_names"
+
+
+def test_failed_plan_gives_one_status_issue(plan_dir, base_plan):
+    plan = replace(base_plan, status="failed", failure={"stage": "exchange", "reason": "no exchange configuration"},
+                   phases=())
+    report = validate_plan(_write(plan_dir, plan))
+    assert len(report.issues) == 1
+    assert report.issues[0].check == "status" and "no exchange configuration" in report.issues[0].message
+    assert not report.valid
