@@ -128,5 +128,55 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
     show_roadmap(file, scene, ctx.obj["cache_dir"])
 
 
+@main.command()
+@click.argument("scene", type=click.Path(path_type=Path))
+@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("plan.json"),
+              show_default=True, help="Where to write the plan JSON.")
+@click.option("--seed", type=int, default=None, help="Random seed (default: the scene's planning.seed).")
+@click.option("--planner", type=click.Choice(["roadmap", "rrt-connect"]), default="roadmap", show_default=True,
+              help="Queries through the cached Super Graph, or single-query RRT-Connect (the paper's baseline).")
+@click.option("--no-build", is_flag=True, help="Refuse missing or stale artefacts instead of building them.")
+@click.option("--jobs", type=int, default=2, show_default=True, help="Worker processes for artefact builds.")
+@click.option("--no-timings", is_flag=True,
+              help="Leave wall-clock times out of the plan, so that the same seed writes the same bytes.")
+@click.option("--no-check", is_flag=True, help="Skip the independent validation of the written plan.")
+@click.option("--roadmap-nodes", type=int, default=50, show_default=True,
+              help="Nodes per elementary roadmap of the roadmap to use (built if missing).")
+@click.option("--grasp-target", type=int, default=None,
+              help="Target size of the grasp lists to use (built if missing; default 120).")
+@click.pass_context
+def plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, planner: str, no_build: bool, jobs: int,
+         no_timings: bool, no_check: bool, roadmap_nodes: int, grasp_target: int | None) -> None:
+    """Plan the pick, hand-over and place of the scene's object; write the plan JSON.
+
+    Exits 0 when solved, 1 with the failing stage and reason when not."""
+    from regrasp_cli.plan.command import run_plan
+
+    run_plan(scene, ctx.obj["cache_dir"], output, seed, planner, not no_build, jobs, not no_timings, not no_check,
+             roadmap_nodes, grasp_target)
+
+
+@main.command()
+@click.argument("plan_file", metavar="PLAN", type=click.Path(path_type=Path))
+@click.option("--resolution", type=float, default=0.01, show_default=True,
+              help="Largest joint step (rad) between two checked configurations.")
+@click.option("--cartesian-step", type=float, default=0.005, show_default=True,
+              help="Largest displacement (m) of any robot point between two checked configurations.")
+def validate(plan_file: Path, resolution: float, cartesian_step: float) -> None:
+    """Replay a plan with independent checks; exit 0 when valid, 1 when not."""
+    from rich.console import Console
+
+    from regrasp_cli.errors import InputError
+    from regrasp_cli.validate import print_validation, validate_plan
+
+    for value, name in ((resolution, "--resolution"), (cartesian_step, "--cartesian-step")):
+        if not value > 0:
+            raise InputError(None, name, f"expected a number > 0, found {value}")
+    report = validate_plan(plan_file, resolution, cartesian_step)
+    print_validation(report, Console())
+    if not report.valid:
+        sys.exit(1)
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()
