@@ -107,6 +107,41 @@ def _detours(scratch: Scratch, q: np.ndarray) -> list[np.ndarray]:
     return out
 
 
+def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: CollisionWorld, fingers: dict, node_free, q_of,
+            stats: QueryStats) -> tuple[list[np.ndarray], list[tuple[int, float]]]:
+    """Grow a random tree from q until one of its nodes joins a free Super Graph node:
+    the RRT-like local reconnection of §V-B for a configuration in a pocket of the free
+    space that no roadmap node sees.  Returns the tree branch (without q) and the node."""
+    o, robot = scratch.options, scratch.problem.robot
+    moving = np.concatenate([robot.groups["torso"], robot.groups["right_arm"], robot.groups["left_arm"]])
+    nodes, parent = [q], [-1]
+    for _ in range(o.escape_iterations):
+        if scratch.rng.random() < 0.3:  # towards a random roadmap node
+            target = q_of(int(scratch.rng.integers(len(rm.nodes))))
+        else:
+            target = _with_fingers(scratch, robot.sample(scratch.rng, moving, base=q), fingers)
+        d = distance(target, np.asarray(nodes), rm.weights)
+        i = int(np.argmin(d))
+        step = o.rrt.step / max(float(d[i]), 1e-12)
+        new = target if step >= 1 else nodes[i] + (target - nodes[i]) * step
+        if not scratch.segment_free(world, nodes[i], new):
+            continue
+        nodes.append(new)
+        parent.append(i)
+        dn = distance(new, rm.nodes, rm.weights)
+        for j in np.argsort(dn, kind="stable")[:3]:
+            j = int(j)
+            if node_free(j) and scratch.segment_free(world, new, q_of(j)):
+                branch, k = [], len(nodes) - 1
+                while k > 0:
+                    branch.append(nodes[k])
+                    k = parent[k]
+                stats.nodes += len(nodes)
+                return branch[::-1], [(j, float(dn[j]))]
+    stats.nodes += len(nodes)
+    return [], []
+
+
 def smooth(scratch: Scratch, path: np.ndarray, world: CollisionWorld, weights: np.ndarray) -> np.ndarray:
     return shortcut(path, lambda x, y: scratch.segment_free(world, x, y), lambda x, y: distance(x, y, weights),
                     scratch.rng, scratch.options.shortcut_iterations)
@@ -177,14 +212,7 @@ def roadmap_query(scratch: Scratch, rm: Roadmap, a: np.ndarray, b: np.ndarray, w
                 e = ends(mid)
                 if e:
                     return [mid], e
-        d = distance(q, rm.nodes, rm.weights)
-        for i in [int(i) for i in np.argsort(d, kind="stable")[:o.k_connect] if node_free(int(i))][:2]:
-            bridge, n = _rrt(scratch, q, q_of(i), full, worlds.fingers, rm.weights)
-            stats.rrt_calls += 1
-            stats.nodes += n
-            if bridge is not None:
-                return list(bridge[1:-1]), [(i, 0.0)]
-        return [], []
+        return _escape(scratch, rm, q, full, worlds.fingers, node_free, q_of, stats)
 
     (pre_a, src), (pre_b, dst) = attach(a), attach(b)
     path = None
