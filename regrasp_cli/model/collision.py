@@ -39,6 +39,7 @@ import trimesh
 
 from regrasp_cli.config import ObstacleSpec
 from regrasp_cli.model.robot import Robot
+from regrasp_cli.spatial import inverse
 
 
 @dataclass(frozen=True)
@@ -159,6 +160,7 @@ class CollisionWorld:
             go = pin.GeometryObject("object", joint, frame, pin.SE3(X_JO[:3, :3].copy(), X_JO[:3, 3].copy()),
                                     mesh_geometry(obj.mesh))
             self.object_geom = gm.addGeometryObject(go)
+            self._X_JP = X_JO @ inverse(obj.X_PO)  # parent frame P (W or G) in the object's joint
 
         disabled = {frozenset(p) for p in disabled_links}
         link = [robot.model.frames[gm.geometryObjects[g].parentFrame].name for g in range(n_robot)]
@@ -202,6 +204,13 @@ class CollisionWorld:
         self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
             robot.model, self.geometry_model, self.geometry_data)
         self.n_checks = 0
+
+    def set_object_pose(self, X_PO: np.ndarray) -> None:
+        """Move the object within its parent (W, or the holding hand's grasp frame): the
+        pairs and tolerances stay, so one world serves every placement of an attachment."""
+        X_JO = self._X_JP @ X_PO
+        self.geometry_model.geometryObjects[self.object_geom].placement = pin.SE3(X_JO[:3, :3].copy(),
+                                                                                X_JO[:3, 3].copy())
 
     @property
     def n_pairs(self) -> int:

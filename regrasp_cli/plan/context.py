@@ -1,8 +1,9 @@
 """Per-query scratch of the online planner: options, collision worlds, segment checks.
 
 The problem, the grasp lists and the roadmap are immutable inputs; a :class:`Scratch` is
-built for one `regrasp plan` run and holds what the run learns: collision worlds for each
-object placement (built once, ~35 ms each), the random generator and check counters.
+built for one `regrasp plan` run and holds what the run learns: collision worlds (built
+once per attachment of the object, ~35 ms each, and moved to each placement), the random
+generator and check counters.
 
 Segments that the roadmap did not certify (connections to key configurations, repairs,
 approach lines, finger motions) are checked densely: no joint moves more than
@@ -19,6 +20,7 @@ import numpy as np
 
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
 from regrasp_cli.model.ik import IKOptions
+from regrasp_cli.plan.handshape import palm_and_finger_links
 from regrasp_cli.roadmap.local import LocalPlanner, joint_reach
 from regrasp_cli.roadmap.rrt import RRTOptions
 from regrasp_cli.scene import Problem
@@ -69,18 +71,29 @@ class Scratch:
                                   joint_reach(self.problem.robot))
 
     def world(self, X_PO: np.ndarray | None, attached: str | None = None, touching: tuple[str, ...] = (),
-              pair_filter=None, key: str = "") -> CollisionWorld:
+              pair_filter=None, key: str = "") -> "Placed":
         """Self-collision + obstacles + the object at X_PO (in W, or in the grasp frame of
-        ``attached``), cached by placement; ``key`` names a ``pair_filter`` variant."""
-        k = (None if X_PO is None else np.round(X_PO, 12).tobytes(), attached, tuple(sorted(touching)), key)
+        ``attached``).  Worlds are built once per attachment, touching hands and pair
+        filter (``key`` names the filter) and moved to each placement on use."""
+        k = (X_PO is None, attached, tuple(sorted(touching)), key)
         w = self.worlds.get(k)
         if w is None:
             p = self.problem
             obj = None if X_PO is None else ObjectPlacement(p.object.mesh, X_PO, attached, tuple(touching))
+            keep = pair_filter
+            if attached is not None:
+                # the holding hand and the object move as one (its fingers do not move while
+                # it holds): those pairs were checked when it closed, and cost the most
+                rigid = palm_and_finger_links(p.robot, attached)
+                base = pair_filter or (lambda a, b: True)
+
+                def keep(a, b, base=base, rigid=rigid):
+                    return base(a, b) and not ("object" in (a, b) and (a in rigid or b in rigid))
             w = CollisionWorld(p.robot, p.spec.obstacles, p.disabled.links(), obj, p.collision_options,
-                               pair_filter=pair_filter)
+                               pair_filter=keep)
+            w.owner = None
             self.worlds[k] = w
-        return w
+        return Placed(w, X_PO)
 
     def segment_free(self, world: CollisionWorld, q0: np.ndarray, q1: np.ndarray) -> bool:
         return self.local.segment_free(world, q0, q1)
@@ -91,3 +104,30 @@ class Scratch:
     @property
     def checks(self) -> int:
         return sum(w.n_checks for w in self.worlds.values())
+
+
+class Placed:
+    """A collision world with the object at a given placement: the interface of
+    :class:`CollisionWorld` the planners use, moving the shared world's object first
+    when another placement used it last."""
+
+    def __init__(self, world: CollisionWorld, X_PO: np.ndarray | None):
+        self.world, self.X_PO = world, X_PO
+
+    def _place(self) -> CollisionWorld:
+        w = self.world
+        if w.owner is not self:
+            if self.X_PO is not None and (w.owner is None or not np.array_equal(w.owner.X_PO, self.X_PO)):
+                w.set_object_pose(self.X_PO)
+            w.owner = self
+        return w
+
+    def is_free(self, q: np.ndarray) -> bool:
+        return self._place().is_free(q)
+
+    def colliding_pairs(self, q: np.ndarray) -> list[tuple[str, str]]:
+        return self._place().colliding_pairs(q)
+
+    def segment_free(self, q0: np.ndarray, q1: np.ndarray, resolution: float, min_steps: int = 1,
+                     limit: int | None = None) -> bool:
+        return self._place().segment_free(q0, q1, resolution, min_steps, limit)
