@@ -31,6 +31,7 @@ class OnlineOptions:
     """Options of `regrasp plan` (metres, radians, seconds)."""
 
     planner: str = "roadmap"  # or "rrt-connect": the single-query baseline of §VI
+    jobs: int = 2  # processes for the four queries (the result does not depend on it)
     approach_distance: float = 0.08  # pre-grasp offset of the hand before it closes
     lift_height: float = 0.06  # the object is lifted (and lowered) vertically by this
     line_steps: int = 4  # IK waypoints of an approach, retreat or lift line

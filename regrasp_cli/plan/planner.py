@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from regrasp_cli.errors import RegraspError
+from regrasp_cli.parallel import ordered_map
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.plan.context import OnlineOptions, Scratch
 from regrasp_cli.plan.doublegrasp import DoubleGrasp, SingleStats, double_grasps, single_configurations
@@ -160,6 +161,27 @@ def phase_worlds(scratch: Scratch, X_PO: np.ndarray, attached: str | None, finge
     return PhaseWorlds(full, lazy, fingers)
 
 
+QUERY_NAMES = ("grasp", "carry", "place", "rest")
+_QUERY_JOB: dict = {}  # filled before the query workers are forked (they inherit it)
+
+
+def _query_job(name: str):
+    """One query of the current run (in a forked worker, or in this process)."""
+    j = _QUERY_JOB
+    scratch, roadmap = j["scratch"], j["roadmap"]
+    a, b, worlds = j["queries"][name]
+    scratch.rng = np.random.default_rng([j["seed"], QUERY_NAMES.index(name)])
+    qs, before = QueryStats(), scratch.checks
+    try:
+        if roadmap is None:
+            path = rrt_query(scratch, a, b, worlds, j["weights"], qs)
+        else:
+            path = roadmap_query(scratch, roadmap, a, b, worlds, qs)
+        return name, path, qs, None, scratch.checks - before
+    except QueryFailed as exc:
+        return name, None, qs, str(exc), scratch.checks - before
+
+
 def run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
         seed: int) -> Outcome:
     """Plan the pick, hand-over and place; never raises PlanningFailed (see ``failure``)."""
@@ -246,22 +268,28 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         "place": (ex.retreat[-1], st.lift[-1], phase_worlds(scratch, X_GO[t], t, {g: open_[g], t: closed[t]})),
         "rest": (st.approach[0], problem.q_goal, phase_worlds(scratch, task.X_WO_goal, None, open_)),
     }
-    paths, qstats = {}, {}
-    for name, (a, b, worlds) in queries.items():
-        qs = QueryStats()
-        qstats[name] = qs
-        try:
-            if roadmap is None:
-                paths[name] = rrt_query(scratch, a, b, worlds, weights, qs)
-            else:
-                paths[name] = roadmap_query(scratch, roadmap, a, b, worlds, qs)
-        except QueryFailed as exc:
-            raise PlanningFailed(name, str(exc)) from None
-        finally:
-            out.stats.setdefault("queries", {})[name] = {"nodes": qs.nodes, "searches": qs.searches,
-                                                         "invalid_edges": qs.invalid_edges, "rrt_calls": qs.rrt_calls}
-            out.timing[f"{name} planning"] = qs.planning
-            out.timing[f"{name} validation"] = qs.validation
+    # the queries are independent once the key configurations are fixed: each has its own
+    # random stream, so they give the same paths run in turn or in parallel
+    checks_before = scratch.checks
+    _QUERY_JOB.update(scratch=scratch, roadmap=roadmap, weights=weights, seed=seed, queries=queries)
+    try:
+        order = ["place", "rest", "grasp", "carry"]  # longest first
+        results = {r[0]: r for r in ordered_map(_query_job, order, options.jobs)}
+    finally:
+        _QUERY_JOB.clear()
+    paths = {}
+    for name in QUERY_NAMES:
+        _, path, qs, error, checks = results[name]
+        out.stats.setdefault("queries", {})[name] = {"nodes": qs.nodes, "searches": qs.searches,
+                                                     "invalid_edges": qs.invalid_edges, "rrt_calls": qs.rrt_calls}
+        out.timing[f"{name} planning"] = qs.planning
+        out.timing[f"{name} validation"] = qs.validation
+        out.stats["query_checks"] = out.stats.get("query_checks", 0) + checks
+        paths[name] = path
+    failed = next((n for n in QUERY_NAMES if results[n][3] is not None), None)
+    if failed is not None:
+        _clock(out, "queries", t0)
+        raise PlanningFailed(failed, results[failed][3])
     t0 = _clock(out, "queries", t0)
 
     # ---------------------------------------------------------------- phases and timing
@@ -292,5 +320,5 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         clock = float(times[-1])
         out.phases.append(PhaseMotion(name, holding, touching, w, times))
     out.stats["waypoints"] = int(sum(len(m[3]) for m in motions))
-    out.stats["checks"] = scratch.checks
+    out.stats["checks"] = checks_before + out.stats["query_checks"]  # the workers' checks included
     _clock(out, "timing", t0)
