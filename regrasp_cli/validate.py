@@ -42,6 +42,7 @@ from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
 from regrasp_cli.model.collision import CollisionOptions, CollisionWorld, ObjectPlacement
 from regrasp_cli.model.objects import load_object_mesh
 from regrasp_cli.model.robot import Robot, load_robot
+from regrasp_cli.parallel import ordered_map
 from regrasp_cli.plan.timing import segment_duration
 from regrasp_cli.roadmap.local import joint_reach
 from regrasp_cli.spatial import inverse, pose_error
@@ -506,13 +507,27 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
 # ------------------------------------------------------------------ the whole plan
 
 
-def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: float = 0.005) -> ValidationReport:
+_JOB: dict = {}  # filled before the collision workers are forked (they inherit it)
+
+
+def _phase_collisions(k: int) -> tuple[list[Issue], int, float]:
+    j = _JOB
+    t0 = perf_counter()
+    phase = j["plan"].phases[k]
+    found, n = collision_issues(phase, phase_world(j["inputs"], phase, j["carries"][k]), j["reach"],
+                                j["resolution"], j["cartesian_step"])
+    return found, n, perf_counter() - t0
+
+
+def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: float = 0.005,
+                  jobs: int = 2) -> ValidationReport:
     """Check the plan file ``path`` (see the module docstring).
 
     Args:
         path: plan JSON; the files it names are relative to its directory unless absolute.
         resolution: largest joint step (rad or m) between two collision-checked samples.
         cartesian_step: largest displacement (m) of any robot point between two samples.
+        jobs: processes for the collision checks of the phases (the report is the same).
 
     Raises:
         InputError: the plan is malformed or incomplete, a file it names is missing, or
@@ -529,31 +544,44 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
 
     inputs = load_inputs(plan, path)
     robot, reach = inputs.robot, joint_reach(inputs.robot)
-    issues, seconds, summaries = list(inputs.issues), {}, []
+    issues, seconds = list(inputs.issues), {}
+    per_phase: list[list[Issue]] = []
     X_WO = plan.object_poses["start"]
-    poses = []  # X_WO at (start, end) of each phase
+    poses, carries, dts = [], [], []  # X_WO at (start, end) of each phase
     for k, phase in enumerate(plan.phases):
         t0 = perf_counter()
         previous = plan.phases[k - 1] if k else None
-        issues += continuity_issues(phase, previous, robot.joint_names)
-        issues += timing_issues(phase, previous, inputs.velocity, inputs.acceleration)
-        issues += limit_issues(phase, robot.joint_names, inputs.lower, inputs.upper)
-        carry, found = attachment_issues(plan, phase, robot, X_WO)
-        issues += found
-        found, n = collision_issues(phase, phase_world(inputs, phase, carry), reach, resolution, cartesian_step)
-        issues += found
+        found = continuity_issues(phase, previous, robot.joint_names)
+        found += timing_issues(phase, previous, inputs.velocity, inputs.acceleration)
+        found += limit_issues(phase, robot.joint_names, inputs.lower, inputs.upper)
+        carry, more = attachment_issues(plan, phase, robot, X_WO)
+        found += more
+        carries.append(carry)
         X_end = carry.X_WO(robot, phase.waypoints[-1])
         poses.append((X_WO, X_end))
         X_WO = X_end
         if phase.name == "carry":
             if "exchange" not in plan.object_poses:
-                issues.append(Issue(phase.name, None, "input", "a carry phase but no object_poses.exchange"))
+                found.append(Issue(phase.name, None, "input", "a carry phase but no object_poses.exchange"))
             elif off := _pose_differs(X_WO, plan.object_poses["exchange"]):
-                issues.append(Issue(phase.name, len(phase.waypoints) - 1, "attachment",
-                                    f"the object ends the carry {off} away from the exchange pose"))
-        dt = perf_counter() - t0
-        seconds[phase.name] = seconds.get(phase.name, 0.0) + dt
-        summaries.append(PhaseSummary(phase.name, len(phase.waypoints), n, dt))
+                found.append(Issue(phase.name, len(phase.waypoints) - 1, "attachment",
+                                   f"the object ends the carry {off} away from the exchange pose"))
+        per_phase.append(found)
+        dts.append(perf_counter() - t0)
+    _JOB.update(plan=plan, inputs=inputs, carries=carries, reach=reach, resolution=resolution,
+                cartesian_step=cartesian_step)
+    try:
+        # longest phases first, so that two workers finish together
+        order = sorted(range(len(plan.phases)), key=lambda k: -len(plan.phases[k].waypoints))
+        results = dict(zip(order, ordered_map(_phase_collisions, order, jobs)))
+    finally:
+        _JOB.clear()
+    summaries = []
+    for k, phase in enumerate(plan.phases):
+        found, n, dt = results[k]
+        issues += per_phase[k] + found
+        seconds[phase.name] = seconds.get(phase.name, 0.0) + dts[k] + dt
+        summaries.append(PhaseSummary(phase.name, len(phase.waypoints), n, dts[k] + dt))
     if off := _pose_differs(X_WO, plan.object_poses["goal"]):
         where = (plan.phases[-1].name, len(plan.phases[-1].waypoints) - 1) if plan.phases else (None, None)
         issues.append(Issue(*where, "attachment", f"the object ends {off} away from its goal pose"))
