@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 SCENE := configs/scenes/desk_handover.yaml
 
-.PHONY: demo test setup bench-collision bench-grasps bench-roadmap clean
+.PHONY: demo test setup bench-collision bench-grasps bench-roadmap bench-plan clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -19,6 +19,8 @@ demo: setup
 	$(BIN)/regrasp info $(SCENE)
 	$(BIN)/regrasp grasps build $(SCENE)
 	$(BIN)/regrasp roadmap build $(SCENE)
+	$(BIN)/regrasp plan $(SCENE) -o plan.json
+	$(BIN)/regrasp validate plan.json
 
 test: setup
 	$(BIN)/python -m pytest
@@ -31,6 +33,9 @@ bench-grasps: setup
 
 bench-roadmap: setup
 	$(BIN)/python scripts/bench_roadmap.py
+
+bench-plan: setup
+	$(BIN)/python scripts/bench_plan.py --out docs/bench_plan.md
 
 clean:
 	rm -rf $(VENV) cache .pytest_cache
