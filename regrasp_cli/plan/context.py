@@ -48,11 +48,11 @@ class OnlineOptions:
     resolution: float = 0.02  # rad: dense segment check
     cartesian_step: float = 0.01  # m: dense segment check
     k_connect: int = 40  # nearest Super Graph nodes tried when connecting a configuration
-    connections: int = 3  # ... until this many are joined
+    connections: int = 2  # ... until this many are joined
     escape_iterations: int = 1500  # tree growth from an end that no node sees
     repairs: int = 30  # graph re-searches per query before RRT-Connect takes over
     rrt: RRTOptions = RRTOptions(step=0.4, max_iterations=3000)
-    shortcut_iterations: int = 20
+    shortcut_iterations: int = 12
     acceleration: float = 3.0  # rad/s^2 for every joint (URDFs carry no acceleration limits)
     ik: IKOptions = IKOptions(restarts=2, max_iters=40)
 
