@@ -162,12 +162,21 @@ def phase_worlds(scratch: Scratch, X_PO: np.ndarray, attached: str | None, finge
 
 
 QUERY_NAMES = ("grasp", "carry", "place", "rest")
-_QUERY_JOB: dict = {}  # filled before the query workers are forked (they inherit it)
+_JOB: dict = {}  # filled before workers are forked (they inherit it), cleared after
+
+
+def _single_job(hand: str):
+    """Single-grasp configurations of one hand (in a forked worker, or in this process)."""
+    scratch = _JOB["scratch"]
+    scratch.rng = np.random.default_rng([_JOB["seed"], 10 + ("right", "left").index(hand)])
+    before = scratch.checks
+    found, stats = single_configurations(scratch, *_JOB["singles"][hand])
+    return found, stats, scratch.checks - before
 
 
 def _query_job(name: str):
     """One query of the current run (in a forked worker, or in this process)."""
-    j = _QUERY_JOB
+    j = _JOB
     scratch, roadmap = j["scratch"], j["roadmap"]
     a, b, worlds = j["queries"][name]
     scratch.rng = np.random.default_rng([j["seed"], QUERY_NAMES.index(name)])
@@ -197,7 +206,7 @@ def run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, 
 def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
          seed: int, out: Outcome) -> None:
     robot = problem.robot
-    scratch = Scratch(problem, options, np.random.default_rng(seed))
+    scratch = Scratch(problem, options, np.random.default_rng([seed, 20]))  # reset after the singles
     task = problem.spec.task
     weights = roadmap.weights if roadmap is not None else joint_weights(robot)
     t0 = time.perf_counter()
@@ -208,8 +217,15 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     out.giver = g
     env = static_geometry(problem.spec.obstacles)
     shapes = {h: hand_shapes(robot, h, lists[h].finger_q) for h in (g, t)}
-    cfg_g, st_g = single_configurations(scratch, lists[g], shapes[g], task.X_WO_start, env)
-    cfg_t, st_t = single_configurations(scratch, lists[t], shapes[t], task.X_WO_goal, env)
+    # the two hands' searches are independent: in parallel, each with its own random stream
+    _JOB.update(scratch=scratch, seed=seed, singles={g: (lists[g], shapes[g], task.X_WO_start, env),
+                                                     t: (lists[t], shapes[t], task.X_WO_goal, env)})
+    try:
+        (cfg_g, st_g, n_g), (cfg_t, st_t, n_t) = ordered_map(_single_job, [g, t], options.jobs)
+    finally:
+        _JOB.clear()
+    out.stats["single_checks"] = n_g + n_t
+    scratch.rng = np.random.default_rng([seed, 20])  # the same stream after, whatever the jobs
     out.stats["single_grasps"] = {g: st_g.__dict__, t: st_t.__dict__}
     for hand, cfgs, st, where in ((g, cfg_g, st_g, "start"), (t, cfg_t, st_t, "goal")):
         if not cfgs:
@@ -270,13 +286,13 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     }
     # the queries are independent once the key configurations are fixed: each has its own
     # random stream, so they give the same paths run in turn or in parallel
-    checks_before = scratch.checks
-    _QUERY_JOB.update(scratch=scratch, roadmap=roadmap, weights=weights, seed=seed, queries=queries)
+    checks_before = scratch.checks + out.stats["single_checks"] if options.jobs > 1 else scratch.checks
+    _JOB.update(scratch=scratch, roadmap=roadmap, weights=weights, seed=seed, queries=queries)
     try:
         order = ["place", "rest", "grasp", "carry"]  # longest first
         results = {r[0]: r for r in ordered_map(_query_job, order, options.jobs)}
     finally:
-        _QUERY_JOB.clear()
+        _JOB.clear()
     paths = {}
     for name in QUERY_NAMES:
         _, path, qs, error, checks = results[name]
