@@ -42,7 +42,7 @@ from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
 from regrasp_cli.model.collision import CollisionOptions, CollisionWorld, ObjectPlacement
 from regrasp_cli.model.objects import load_object_mesh
 from regrasp_cli.model.robot import Robot, load_robot
-from regrasp_cli.parallel import ordered_map
+from regrasp_cli.parallel import ordered_map, shared
 from regrasp_cli.plan.timing import segment_duration
 from regrasp_cli.roadmap.local import joint_reach
 from regrasp_cli.spatial import inverse, pose_error
@@ -507,11 +507,8 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
 # ------------------------------------------------------------------ the whole plan
 
 
-_JOB: dict = {}  # filled before the collision workers are forked (they inherit it)
-
-
 def _phase_collisions(k: int) -> tuple[list[Issue], int, float]:
-    j = _JOB
+    j = shared()
     t0 = perf_counter()
     phase = j["plan"].phases[k]
     found, n = collision_issues(phase, phase_world(j["inputs"], phase, j["carries"][k]), j["reach"],
@@ -568,14 +565,11 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
                                    f"the object ends the carry {off} away from the exchange pose"))
         per_phase.append(found)
         dts.append(perf_counter() - t0)
-    _JOB.update(plan=plan, inputs=inputs, carries=carries, reach=reach, resolution=resolution,
-                cartesian_step=cartesian_step)
-    try:
-        # longest phases first, so that two workers finish together
-        order = sorted(range(len(plan.phases)), key=lambda k: -len(plan.phases[k].waypoints))
-        results = dict(zip(order, ordered_map(_phase_collisions, order, jobs)))
-    finally:
-        _JOB.clear()
+    job = {"plan": plan, "inputs": inputs, "carries": carries, "reach": reach, "resolution": resolution,
+           "cartesian_step": cartesian_step}
+    # longest phases first, so that two workers finish together
+    order = sorted(range(len(plan.phases)), key=lambda k: -len(plan.phases[k].waypoints))
+    results = dict(zip(order, ordered_map(_phase_collisions, order, jobs, job)))
     summaries = []
     for k, phase in enumerate(plan.phases):
         found, n, dt = results[k]

@@ -255,7 +255,7 @@ def main() -> None:
         t0 = time.perf_counter()
         roadmap = Roadmap.of(art)
         setup["Roadmap.of (Super Graph ready)"] = time.perf_counter() - t0
-        setup["Super Graph"] = f"{len(roadmap.nodes)} nodes, {roadmap.graph.number_of_edges()} edges"
+        setup["Super Graph"] = f"{len(roadmap.nodes)} nodes, {len(roadmap.edges)} edges"
 
     records = []
     jsonl = args.out.with_suffix(".jsonl") if args.out else None

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from regrasp_cli.errors import RegraspError
-from regrasp_cli.parallel import ordered_map
+from regrasp_cli.parallel import ordered_map, shared
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.plan.context import OnlineOptions, Scratch
 from regrasp_cli.plan.doublegrasp import DoubleGrasp, SingleStats, double_grasps, single_configurations
@@ -162,21 +162,19 @@ def phase_worlds(scratch: Scratch, X_PO: np.ndarray, attached: str | None, finge
 
 
 QUERY_NAMES = ("grasp", "carry", "place", "rest")
-_JOB: dict = {}  # filled before workers are forked (they inherit it), cleared after
-
-
 def _single_job(hand: str):
     """Single-grasp configurations of one hand (in a forked worker, or in this process)."""
-    scratch = _JOB["scratch"]
-    scratch.rng = np.random.default_rng([_JOB["seed"], 10 + ("right", "left").index(hand)])
+    j = shared()
+    scratch = j["scratch"]
+    scratch.rng = np.random.default_rng([j["seed"], 10 + ("right", "left").index(hand)])
     before = scratch.checks
-    found, stats = single_configurations(scratch, *_JOB["singles"][hand])
+    found, stats = single_configurations(scratch, *j["singles"][hand])
     return found, stats, scratch.checks - before
 
 
 def _query_job(name: str):
     """One query of the current run (in a forked worker, or in this process)."""
-    j = _JOB
+    j = shared()
     scratch, roadmap = j["scratch"], j["roadmap"]
     a, b, worlds = j["queries"][name]
     scratch.rng = np.random.default_rng([j["seed"], QUERY_NAMES.index(name)])
@@ -211,6 +209,14 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     weights = roadmap.weights if roadmap is not None else joint_weights(robot)
     t0 = time.perf_counter()
 
+    # the ends of the task first: nothing else matters if the robot starts in collision
+    for q, X, stage, what in ((problem.q_start, task.X_WO_start, "grasp", "start"),
+                              (problem.q_goal, task.X_WO_goal, "rest", "goal")):
+        world = scratch.world(X)
+        if not world.is_free(q):
+            pairs = ", ".join("-".join(p) for p in world.colliding_pairs(q)[:3])
+            raise PlanningFailed(stage, f"the robot's {what} configuration is in collision ({pairs})")
+
     # ---------------------------------------------------------------- double grasps
     g = picking_hand(problem, scratch)
     t = OTHER[g]
@@ -218,12 +224,9 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     env = static_geometry(problem.spec.obstacles)
     shapes = {h: hand_shapes(robot, h, lists[h].finger_q) for h in (g, t)}
     # the two hands' searches are independent: in parallel, each with its own random stream
-    _JOB.update(scratch=scratch, seed=seed, singles={g: (lists[g], shapes[g], task.X_WO_start, env),
-                                                     t: (lists[t], shapes[t], task.X_WO_goal, env)})
-    try:
-        (cfg_g, st_g, n_g), (cfg_t, st_t, n_t) = ordered_map(_single_job, [g, t], options.jobs)
-    finally:
-        _JOB.clear()
+    job = {"scratch": scratch, "seed": seed, "singles": {g: (lists[g], shapes[g], task.X_WO_start, env),
+                                                         t: (lists[t], shapes[t], task.X_WO_goal, env)}}
+    (cfg_g, st_g, n_g), (cfg_t, st_t, n_t) = ordered_map(_single_job, [g, t], options.jobs, job)
     out.stats["single_checks"] = n_g + n_t
     scratch.rng = np.random.default_rng([seed, 20])  # the same stream after, whatever the jobs
     out.stats["single_grasps"] = {g: st_g.__dict__, t: st_t.__dict__}
@@ -269,14 +272,6 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     open_ = {h: robot.hands[h].open for h in (g, t)}
     closed = {g: lists[g].finger_q[sg.grasp], t: lists[t].finger_q[st.grasp]}
     X_GO = {g: inverse(lists[g].X_OG[sg.grasp]), t: inverse(lists[t].X_OG[st.grasp])}
-    start_world = scratch.world(task.X_WO_start)
-    if not start_world.is_free(problem.q_start):
-        pairs = ", ".join("-".join(p) for p in start_world.colliding_pairs(problem.q_start)[:3])
-        raise PlanningFailed("grasp", f"the robot's start configuration is in collision ({pairs})")
-    goal_world = scratch.world(task.X_WO_goal)
-    if not goal_world.is_free(problem.q_goal):
-        pairs = ", ".join("-".join(p) for p in goal_world.colliding_pairs(problem.q_goal)[:3])
-        raise PlanningFailed("rest", f"the robot's goal configuration is in collision ({pairs})")
 
     queries = {
         "grasp": (problem.q_start, sg.approach[0], phase_worlds(scratch, task.X_WO_start, None, open_)),
@@ -287,12 +282,9 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     # the queries are independent once the key configurations are fixed: each has its own
     # random stream, so they give the same paths run in turn or in parallel
     checks_before = scratch.checks + out.stats["single_checks"] if options.jobs > 1 else scratch.checks
-    _JOB.update(scratch=scratch, roadmap=roadmap, weights=weights, seed=seed, queries=queries)
-    try:
-        order = ["place", "rest", "grasp", "carry"]  # longest first
-        results = {r[0]: r for r in ordered_map(_query_job, order, options.jobs)}
-    finally:
-        _JOB.clear()
+    job = {"scratch": scratch, "roadmap": roadmap, "weights": weights, "seed": seed, "queries": queries}
+    order = ["place", "rest", "grasp", "carry"]  # longest first
+    results = {r[0]: r for r in ordered_map(_query_job, order, options.jobs, job)}
     paths = {}
     for name in QUERY_NAMES:
         _, path, qs, error, checks = results[name]

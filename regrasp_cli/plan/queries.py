@@ -27,8 +27,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from regrasp_cli.model.collision import CollisionWorld
-from regrasp_cli.plan.context import Scratch
+from regrasp_cli.plan.context import Placed, Scratch
 from regrasp_cli.roadmap.build import RoadmapArtefact
 from regrasp_cli.roadmap.local import distance
 from regrasp_cli.roadmap.query import QueryMemo
@@ -106,8 +105,8 @@ class PhaseWorlds:
     """Collision worlds of a phase: ``full`` checks everything (uncertified segments),
     ``lazy`` only what the roadmap did not (its nodes and edges)."""
 
-    full: CollisionWorld
-    lazy: CollisionWorld
+    full: Placed
+    lazy: Placed
     fingers: dict  # hand -> finger values during the phase
 
 
@@ -118,7 +117,7 @@ def _with_fingers(scratch: Scratch, q: np.ndarray, fingers: dict) -> np.ndarray:
     return q
 
 
-def _rrt(scratch: Scratch, a: np.ndarray, b: np.ndarray, world: CollisionWorld, fingers: dict,
+def _rrt(scratch: Scratch, a: np.ndarray, b: np.ndarray, world: Placed, fingers: dict,
          weights: np.ndarray) -> tuple[np.ndarray | None, int]:
     robot = scratch.problem.robot
     moving = np.concatenate([robot.groups["torso"], robot.groups["right_arm"], robot.groups["left_arm"]])
@@ -144,7 +143,7 @@ def _detours(scratch: Scratch, q: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: CollisionWorld, fingers: dict, node_free, q_of,
+def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: Placed, fingers: dict, node_free, q_of,
             stats: QueryStats) -> tuple[list[np.ndarray], list[tuple[int, float]]]:
     """Grow a random tree from q until one of its nodes joins a free Super Graph node:
     the RRT-like local reconnection of §V-B for a configuration in a pocket of the free
@@ -179,7 +178,7 @@ def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: CollisionWorld,
     return [], []
 
 
-def smooth(scratch: Scratch, path: np.ndarray, world: CollisionWorld, weights: np.ndarray) -> np.ndarray:
+def smooth(scratch: Scratch, path: np.ndarray, world: Placed, weights: np.ndarray) -> np.ndarray:
     return shortcut(path, lambda x, y: scratch.segment_free(world, x, y), lambda x, y: distance(x, y, weights),
                     scratch.rng, scratch.options.shortcut_iterations)
 
@@ -193,7 +192,8 @@ def rrt_query(scratch: Scratch, a: np.ndarray, b: np.ndarray, worlds: PhaseWorld
     stats.nodes += n
     if path is None:
         stats.planning += time.perf_counter() - t0
-        raise QueryFailed(f"RRT-Connect found no path in {scratch.options.rrt.max_iterations} iterations")
+        raise QueryFailed(f"RRT-Connect found no path within its budget of {scratch.options.rrt.max_iterations} "
+                          "iterations")
     path = smooth(scratch, path, worlds.full, weights)
     stats.planning += time.perf_counter() - t0
     return path
@@ -284,8 +284,8 @@ def roadmap_query(scratch: Scratch, rm: Roadmap, a: np.ndarray, b: np.ndarray, w
         if bridge is None:
             stats.planning += time.perf_counter() - t_start - validation
             stats.validation += validation
-            raise QueryFailed(f"no path in the roadmap after {stats.searches} searches and RRT-Connect found none "
-                              f"in {o.rrt.max_iterations} iterations")
+            raise QueryFailed(f"no path in the roadmap after {stats.searches} searches, and RRT-Connect found none "
+                              f"within its budget of {o.rrt.max_iterations} iterations")
         path = bridge
     path = smooth(scratch, path, full, rm.weights)
     stats.planning += time.perf_counter() - t_start - validation

@@ -1,0 +1,462 @@
+"""The online stage (Saut et al. 2010, §IV-B, §V-B, §V-C) piece by piece, on the default
+scene with small grasp lists built once per session (shared with tests/test_cli_plan.py):
+
+* hand shapes: hand-hand and hand-environment tests, against a brute-force coal check
+  without the bounding-sphere filter;
+* key configurations: a single grasp (pose, collisions, approach, lift) and the straight
+  Cartesian lines they are made of;
+* exchange: the orientation from the grasp directions, the exchange pose on the grid;
+* the planner's failures, each at its own stage with its reason, and its independence of
+  the number of worker processes;
+* a roadmap query on a hand-made three-node Super Graph whose short edge the object blocks.
+
+Collision checks of results use worlds built here from the Problem and the plan checker's
+dense sampling (:func:`regrasp_cli.validate.collision_issues`), not the planner's own.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import coal
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from regrasp_cli.grasp.build import BuildOptions, GraspList, load_or_build
+from regrasp_cli.grasp.single import GraspOptions
+from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, mesh_geometry, obstacle_geometry
+from regrasp_cli.plan.context import OnlineOptions, Scratch
+from regrasp_cli.plan.doublegrasp import cheap_order, double_grasps, environment_free, single_configurations
+from regrasp_cli.plan.exchange import exchange_orientation, grid_nodes, wrist_path_cost
+from regrasp_cli.plan.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, hands_collide, \
+    static_geometry
+from regrasp_cli.plan.keyconf import SingleConfig, approach_axis, cartesian_line, preshapes, shoulder, \
+    single_configuration, wrist
+from regrasp_cli.plan.planner import _object_shape, exchange_pose, phase_worlds, run
+from regrasp_cli.plan.queries import QueryStats, Roadmap, roadmap_query
+from regrasp_cli.roadmap.local import distance, joint_reach, joint_weights
+from regrasp_cli.roadmap.rrt import RRTOptions
+from regrasp_cli.spatial import inverse, pose_error, rotation_angle
+from regrasp_cli.trajectory import Phase
+from regrasp_cli.validate import collision_issues
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
+GRASP_TARGET = 20  # grasps per hand: small lists (~3 s per hand), as `plan --grasp-target 20`
+POSE_TOL = (0.001, 0.01)  # m, rad
+QUERIES = ("grasp", "carry", "place", "rest")
+
+
+# ------------------------------------------------------------------ fixtures and helpers
+
+
+@pytest.fixture(scope="module")
+def lists(problem, cache_dir) -> dict[str, GraspList]:
+    """Both hands' grasp lists, in the session cache (the CLI tests use the same ones)."""
+    options = BuildOptions(grasp=replace(GraspOptions(), target=GRASP_TARGET), seed=problem.spec.planning.seed,
+                           jobs=2)
+    return {h: load_or_build(SCENE_YAML, cache_dir, h, options) for h in ("right", "left")}
+
+
+@pytest.fixture(scope="module")
+def shapes(problem, lists) -> dict[str, list[HandShape]]:
+    return {h: hand_shapes(problem.robot, h, lists[h].finger_q) for h in lists}
+
+
+@pytest.fixture(scope="module")
+def env(problem) -> StaticGeometry:
+    return static_geometry(problem.spec.obstacles)
+
+
+def obstacle(problem, name: str):
+    return next(o for o in problem.spec.obstacles if o.name == name)
+
+
+def new_scratch(problem, seed: int = 0, **options) -> Scratch:
+    return Scratch(problem, OnlineOptions(**options), np.random.default_rng(seed))
+
+
+def _tf(X: np.ndarray) -> coal.Transform3s:
+    return coal.Transform3s(X[:3, :3].copy(), X[:3, 3].copy())
+
+
+def _collide(g1, X1: np.ndarray, g2, X2: np.ndarray) -> bool:
+    return coal.collide(g1, _tf(X1), g2, _tf(X2), coal.CollisionRequest(), coal.CollisionResult()) > 0
+
+
+def brute_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry) -> bool:
+    """Every hand geometry against every obstacle, without the bounding-sphere filter."""
+    return any(_collide(g, X_WG @ X_GL, o, X_WO) for g, X_GL in zip(shape.geometries, shape.X_GL)
+               for o, X_WO in zip(env.geometries, env.X_W))
+
+
+def brute_hands_collide(a: HandShape, X_OGa: np.ndarray, b: HandShape, X_OGb: np.ndarray) -> bool:
+    return any(_collide(ga, X_OGa @ Xa, gb, X_OGb @ Xb) for ga, Xa in zip(a.geometries, a.X_GL)
+               for gb, Xb in zip(b.geometries, b.X_GL))
+
+
+def translated(X: np.ndarray, d) -> np.ndarray:
+    Y = X.copy()
+    Y[:3, 3] += np.asarray(d, float)
+    return Y
+
+
+def path_collisions(world: CollisionWorld, path: np.ndarray, problem) -> list:
+    """Issues of the plan checker's dense collision test along ``path`` (k, nq)."""
+    phase = Phase("test", (), (), np.asarray(path), np.zeros(len(path)))
+    issues, _ = collision_issues(phase, world, joint_reach(problem.robot), 0.01, 0.005)
+    return issues
+
+
+def static_world(problem, X_WO: np.ndarray, touching: tuple[str, ...] = ()) -> CollisionWorld:
+    return problem.world(ObjectPlacement(problem.object.mesh, X_WO, None, touching))
+
+
+def grasp_from_below(problem, hand: str) -> np.ndarray:
+    """X_OG (4, 4) of a hand under the object: its grasp frame 2 cm below the object's base
+    (inside the 4 cm desk top when the object stands on it), approaching straight up."""
+    a_G = approach_axis(new_scratch(problem), hand)  # wrist -> grasp frame, in G
+    R_OG, _ = Rotation.align_vectors(np.array([[0.0, 0.0, 1.0]]), a_G[None])
+    X = np.eye(4)
+    X[:3, :3] = R_OG.as_matrix()
+    c = problem.object.mesh.centroid
+    X[:3, 3] = [c[0], c[1], -0.02]
+    return X
+
+
+# ------------------------------------------------------------------ hand shapes
+
+
+def test_hands_at_the_same_pose_collide_and_apart_do_not(problem, lists, shapes):
+    right, left = lists["right"], lists["left"]
+    X = right.X_OG[0]
+    assert hands_collide(shapes["right"][0], X, shapes["right"][0], X)
+    assert hands_collide(shapes["right"][0], X, shapes["left"][0], X)  # the left hand where the right one is
+    assert hands_collide(shapes["left"][0], X, shapes["right"][0], X)
+    far = translated(left.X_OG[0], [1.0, 0.0, 0.0])  # the left hand 1 m away along the object x
+    assert not hands_collide(shapes["right"][0], X, shapes["left"][0], far)
+
+
+def test_hands_collide_is_symmetric_and_matches_a_brute_force_check(lists, shapes):
+    right, left = lists["right"], lists["left"]
+    n = 8
+    seen = set()
+    for i in range(n):
+        for j in range(n):
+            ab = hands_collide(shapes["right"][i], right.X_OG[i], shapes["left"][j], left.X_OG[j])
+            ba = hands_collide(shapes["left"][j], left.X_OG[j], shapes["right"][i], right.X_OG[i])
+            assert ab == ba, (i, j)
+            assert ab == brute_hands_collide(shapes["right"][i], right.X_OG[i], shapes["left"][j], left.X_OG[j]), (i, j)
+            seen.add(ab)
+    assert seen == {True, False}  # both outcomes occur among these pairs: the check is not vacuous
+
+
+def test_a_hand_from_below_hits_the_desk_top(problem, lists, shapes):
+    X_WO = problem.spec.task.X_WO_start
+    X_OG = grasp_from_below(problem, "right")
+    X_WG = X_WO @ X_OG
+    assert X_WG[2, 3] < 0.74  # the grasp frame is under the desk's top face
+    desk = static_geometry((obstacle(problem, "desk_top"),))
+    others = static_geometry(tuple(o for o in problem.spec.obstacles if o.name.startswith(("lamp", "vase"))))
+    hand = shapes["right"][0]  # fingers closed as for grasp 0: the palm matters here
+    assert hand_hits_static(hand, X_WG, desk)
+    assert not hand_hits_static(hand, X_WG, others)
+    # the same grasp of the object lifted 30 cm off the desk touches nothing
+    assert not hand_hits_static(hand, translated(X_WO, [0, 0, 0.3]) @ X_OG, static_geometry(problem.spec.obstacles))
+
+
+def test_environment_filter_drops_the_grasps_that_hit_the_desk(problem, lists, env):
+    """A list with a grasp from below appended: at the start pose (on the desk) the filter
+    keeps exactly the grasps whose hand touches no obstacle (brute force), the one from
+    below dropped; with the object lifted into free space it keeps them all."""
+    g = lists["right"]
+    below = grasp_from_below(problem, "right")
+    extended = replace(g, X_OG=np.concatenate([g.X_OG, below[None]]),
+                       finger_q=np.concatenate([g.finger_q, g.finger_q[:1]]))
+    shapes = hand_shapes(problem.robot, "right", extended.finger_q)
+    X_WO = problem.spec.task.X_WO_start
+    kept = environment_free(extended, shapes, X_WO, env)
+    assert len(g) not in kept  # the grasp from below
+    assert 0 < len(kept) < len(extended)
+    expected = [k for k in range(len(extended)) if not brute_hits_static(shapes[k], X_WO @ extended.X_OG[k], env)]
+    assert kept.tolist() == expected
+    lifted = translated(X_WO, [0, 0, 0.3])
+    assert environment_free(extended, shapes, lifted, env).tolist() == list(range(len(extended)))
+
+
+# ------------------------------------------------------------------ key configurations
+
+
+@pytest.fixture(scope="module")
+def single(problem, lists, shapes, env) -> tuple[Scratch, SingleConfig]:
+    """The first single-grasp configuration of the right hand at the object's start pose,
+    in the planner's order."""
+    scratch = new_scratch(problem)
+    g, X_WO = lists["right"], problem.spec.task.X_WO_start
+    for k in cheap_order(scratch, g, environment_free(g, shapes["right"], X_WO, env), X_WO)[:10]:
+        c = single_configuration(scratch, g, int(k), X_WO)
+        if c is not None:
+            return scratch, c
+    pytest.fail("no single-grasp configuration among the 10 best right-hand grasps at the start pose")
+
+
+def test_single_configuration_grasps_at_the_grasp_pose(problem, lists, single):
+    _, c = single
+    robot, h, g = problem.robot, problem.robot.hands["right"], lists["right"]
+    assert (c.hand, c.X_WO.tolist()) == ("right", problem.spec.task.X_WO_start.tolist())
+    dp, da = pose_error(robot.fk(c.q_closed, h.grasp_frame), c.X_WO @ g.X_OG[c.grasp])
+    assert dp <= POSE_TOL[0] and da <= POSE_TOL[1], (dp, da)
+    assert np.array_equal(c.q_closed[h.idx], g.finger_q[c.grasp])
+    assert robot.within_limits(c.q_closed)
+
+
+def test_single_configuration_is_collision_free(problem, lists, single):
+    """Closed on the object (its fingertips may touch it), the approach with the object
+    standing free of the hand, the lift with the object held."""
+    _, c = single
+    X_OG = lists["right"].X_OG[c.grasp]
+    assert static_world(problem, c.X_WO, ("right",)).colliding_pairs(c.q_closed) == []
+    assert path_collisions(static_world(problem, c.X_WO), c.approach, problem) == []
+    held = problem.world(ObjectPlacement(problem.object.mesh, inverse(X_OG), "right", ("right",)))
+    assert path_collisions(held, c.lift, problem) == []
+
+
+def test_approach_starts_open_and_ends_preshaped_at_the_grasp_pose(problem, lists, single):
+    scratch, c = single
+    robot, h = problem.robot, problem.robot.hands["right"]
+    closed = lists["right"].finger_q[c.grasp]
+    assert np.array_equal(c.approach[0][h.idx], h.open)
+    end = c.approach[-1]
+    assert any(np.allclose(end[h.idx], f, atol=1e-12) for f in preshapes(scratch, "right", closed))
+    others = np.setdiff1d(np.arange(robot.nq), h.idx)
+    assert np.array_equal(end[others], c.q_closed[others])  # the hand is at the grasp pose
+    # it starts approach_distance away, with the same orientation
+    X_end, X_start = robot.fk(end, h.grasp_frame), robot.fk(c.approach[0], h.grasp_frame)
+    assert np.linalg.norm(X_start[:3, 3] - X_end[:3, 3]) == pytest.approx(scratch.options.approach_distance, abs=1e-3)
+    assert rotation_angle(X_start[:3, :3].T @ X_end[:3, :3]) <= POSE_TOL[1]
+    # only the grasping arm and hand move
+    moving = np.flatnonzero(np.any(c.approach != c.approach[-1], axis=0))
+    assert set(moving) <= set(h.arm_idx) | set(h.idx)
+
+
+def test_lift_raises_the_object_by_lift_height(problem, lists, single):
+    scratch, c = single
+    robot, h = problem.robot, problem.robot.hands["right"]
+    X_GO = inverse(lists["right"].X_OG[c.grasp])
+    assert np.array_equal(c.lift[0], c.q_closed)
+    assert np.all(c.lift[:, h.idx] == c.q_closed[h.idx])  # the fingers stay closed
+    z = [(robot.fk(q, h.grasp_frame) @ X_GO)[2, 3] for q in c.lift]
+    assert np.all(np.diff(z) > 0)
+    X_lifted = robot.fk(c.lift[-1], h.grasp_frame) @ X_GO
+    dp, da = pose_error(X_lifted, translated(c.X_WO, [0, 0, scratch.options.lift_height]))
+    assert dp <= POSE_TOL[0] and da <= POSE_TOL[1], (dp, da)
+
+
+def test_cartesian_line_moves_the_grasp_frame_on_a_straight_line(problem, single):
+    scratch, c = single
+    robot, h = problem.robot, problem.robot.hands["right"]
+    X_end = robot.fk(c.q_closed, h.grasp_frame)
+    X_far = translated(X_end, [0.05, -0.03, 0.08])
+    steps = 4
+    line = cartesian_line(scratch, "right", c.q_closed, X_far, steps)
+    assert line is not None and line.shape == (steps + 1, robot.nq)
+    assert np.array_equal(line[-1], c.q_closed)
+    for i, q in enumerate(line):  # from X_far (i = 0) to X_end, evenly
+        X = robot.fk(q, h.grasp_frame)
+        p_expected = X_far[:3, 3] + (i / steps) * (X_end[:3, 3] - X_far[:3, 3])
+        assert np.linalg.norm(X[:3, 3] - p_expected) <= 1e-3, i
+        assert rotation_angle(X[:3, :3].T @ X_end[:3, :3]) <= POSE_TOL[1], i  # orientation kept
+    moving = np.flatnonzero(np.any(line != line[-1], axis=0))
+    assert set(moving) <= set(h.arm_idx)
+
+
+# ------------------------------------------------------------------ exchange
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_exchange_orientation_maps_consistent_directions_exactly(seed):
+    rng = np.random.default_rng(seed)
+    R_true = Rotation.random(random_state=rng).as_matrix()
+    a_r, a_l = rng.normal(size=3), rng.normal(size=3)
+    d_r, d_l = 0.4 * R_true @ a_r, 2.5 * R_true @ a_l  # lengths do not matter, directions do
+    R = exchange_orientation(a_r, a_l, d_r, d_l)
+    assert np.allclose(R.T @ R, np.eye(3), atol=1e-9) and np.linalg.det(R) == pytest.approx(1.0)
+    unit = lambda v: v / np.linalg.norm(v)  # noqa: E731
+    assert np.allclose(R @ unit(a_r), unit(d_r), atol=1e-9)
+    assert np.allclose(R @ unit(a_l), unit(d_l), atol=1e-9)
+    assert np.allclose(R, R_true, atol=1e-9)  # two independent directions fix the rotation
+
+
+@pytest.fixture(scope="module")
+def best_double(problem, lists, shapes, env):
+    """The best double grasp of the default problem (right hand picks, left hand places)."""
+    scratch = new_scratch(problem)
+    task = problem.spec.task
+    giver, _ = single_configurations(scratch, lists["right"], shapes["right"], task.X_WO_start, env)
+    taker, _ = single_configurations(scratch, lists["left"], shapes["left"], task.X_WO_goal, env)
+    doubles = double_grasps(giver, lists["right"], shapes["right"], taker, lists["left"], shapes["left"])
+    assert doubles, "no double grasp on the default scene"
+    return doubles[0]
+
+
+def test_exchange_pose_puts_the_object_centre_on_a_free_grid_node(problem, lists, env, best_double):
+    scratch = new_scratch(problem)
+    robot, task = problem.robot, problem.spec.task
+    obj = _object_shape(problem)
+    X, tested = exchange_pose(scratch, best_double, lists, env, obj)
+    assert X is not None and tested >= 1
+    assert np.allclose(X[:3, :3].T @ X[:3, :3], np.eye(3), atol=1e-9) and np.linalg.det(X[:3, :3]) > 0
+    centre = X[:3, :3] @ obj.centres[0] + X[:3, 3]
+    # Fig. 6's grid: the box around the object's start and goal and the wrists at rest,
+    # from 8 cm above the support up
+    start, goal = task.X_WO_start[:3, 3], task.X_WO_goal[:3, 3]
+    anchors = np.array([start, goal, wrist(scratch, "right", robot.q_rest), wrist(scratch, "left", robot.q_rest)])
+    lower, upper = anchors.min(axis=0) - 0.1, anchors.max(axis=0) + 0.1
+    lower[2] = max(start[2], goal[2]) + 0.08
+    upper[2] = max(upper[2], lower[2])
+    nodes = grid_nodes(lower, upper, scratch.options.exchange_step)
+    assert np.min(np.linalg.norm(nodes - centre, axis=1)) < 1e-9
+    # ... the ``tested``-th cheapest node of the wrist-path cost
+    costs = np.sort(wrist_path_cost(nodes, anchors))
+    assert wrist_path_cost(centre[None], anchors)[0] == pytest.approx(costs[tested - 1])
+    # the object there keeps 2 cm from every obstacle (coal distance, object mesh itself)
+    mesh = mesh_geometry(problem.object.mesh)
+    for ob in problem.spec.obstacles:
+        d = coal.distance(mesh, _tf(X), obstacle_geometry(ob), _tf(ob.X_WO), coal.DistanceRequest(),
+                          coal.DistanceResult())
+        assert d >= 0.02 - 1e-6, ob.name
+    # and both shoulders reach it
+    reach = joint_reach(robot)
+    for h in ("right", "left"):
+        assert np.linalg.norm(centre - shoulder(scratch, h, robot.q_rest)) <= reach[robot.hands[h].arm_idx[0]]
+
+
+# ------------------------------------------------------------------ planner failures
+
+
+def problem_with(problem, **task):
+    return replace(problem, spec=replace(problem.spec, task=replace(problem.spec.task, **task)))
+
+
+def test_object_out_of_reach_fails_at_double_grasps(problem, lists):
+    X_far = translated(problem.spec.task.X_WO_start, [0.0, -1.6, 0.0])  # 2.45 m to the robot's right
+    out = run(problem_with(problem, X_WO_start=X_far), lists, None,
+              OnlineOptions(planner="rrt-connect", grasp_attempts=5), seed=0)
+    assert out.failure is not None and out.failure.stage == "double grasps"
+    assert "right-hand" in out.failure.reason and "start pose" in out.failure.reason
+    assert "5 tried with IK" in out.failure.reason
+    assert out.phases == [] and out.double is None and out.exchange is None
+    assert out.stats["single_grasps"]["right"]["kept"] == 0
+
+
+@pytest.mark.parametrize("joint, value, pair", [("r_arm_j4", 0.7, "obstacle:desk_top"),  # the hand in the desk
+                                                ("r_arm_j6", 2.09, "r_arm_link7")])  # wrist folded on the forearm
+def test_start_configuration_in_collision_fails_at_grasp(problem, lists, joint, value, pair):
+    q = problem.robot.q_rest.copy()
+    q[problem.robot.joint_names.index(joint)] = value
+    pairs = static_world(problem, problem.spec.task.X_WO_start).colliding_pairs(q)
+    assert any(pair in p for p in pairs), pairs
+    out = run(replace(problem, q_start=q), lists, None, OnlineOptions(planner="rrt-connect"), seed=0)
+    assert out.failure is not None and out.failure.stage == "grasp"
+    assert "collision" in out.failure.reason and pair in out.failure.reason
+    assert out.phases == []
+
+
+def test_a_one_iteration_rrt_budget_fails_in_a_query(problem, lists):
+    out = run(problem, lists, None, OnlineOptions(planner="rrt-connect", rrt=RRTOptions(step=0.4, max_iterations=1)),
+              seed=0)
+    assert out.failure is not None and out.failure.stage in QUERIES
+    assert "RRT-Connect" in out.failure.reason and "1 iteration" in out.failure.reason
+    assert out.phases == []
+    # the stages before the queries succeeded; the stage named is the first query (in
+    # plan order) that failed, each query up to it made its one RRT-Connect call
+    assert out.double is not None and out.exchange is not None
+    tried = QUERIES[:QUERIES.index(out.failure.stage) + 1]
+    assert all(out.stats["queries"][q]["rrt_calls"] == 1 for q in tried)
+
+
+@pytest.fixture(scope="module")
+def roadmap(problem, cache_dir) -> Roadmap:
+    """The roadmap of `plan --roadmap-nodes 12`, in the session cache (shared with the CLI tests)."""
+    from regrasp_cli.roadmap.build import RoadmapOptions
+    from regrasp_cli.roadmap.build import load_or_build as load_or_build_roadmap
+
+    options = RoadmapOptions(nodes=12, seed=problem.spec.planning.seed)
+    return Roadmap.of(load_or_build_roadmap(SCENE_YAML, cache_dir, options, jobs=2))
+
+
+def test_the_plan_does_not_depend_on_the_number_of_jobs(problem, lists, roadmap):
+    """The queries run in worker processes, each with its own random stream: one or two
+    jobs give the same motion and the same counts."""
+    one, two = (run(problem, lists, roadmap, OnlineOptions(jobs=jobs), seed=0) for jobs in (1, 2))
+    assert one.failure is None and two.failure is None, (one.failure, two.failure)
+    assert [(m.name, m.holding, m.touching) for m in one.phases] == [(m.name, m.holding, m.touching)
+                                                                      for m in two.phases]
+    for a, b in zip(one.phases, two.phases):
+        assert np.array_equal(a.waypoints, b.waypoints) and np.array_equal(a.times, b.times), a.name
+    assert one.stats == two.stats
+
+
+# ------------------------------------------------------------------ roadmap query
+
+
+def _q(problem, **offsets) -> np.ndarray:
+    q = problem.robot.q_rest.copy()
+    for name, v in offsets.items():
+        q[problem.robot.joint_names.index(name)] += v
+    return q
+
+
+@pytest.fixture(scope="module")
+def blocked(problem):
+    """The statuette stands where the right hand is at rest.  a and b swing the right
+    shoulder (r_arm_j1) 0.5 rad either side of rest, so the straight segment a-b, and the
+    short Super Graph edge n0-n1 next to it, go through the object; the detour n0-n2-n1
+    raises the arm (r_arm_j2).  Returns (X_WO, a, b, roadmap)."""
+    robot = problem.robot
+    X_WO = translated(np.eye(4), robot.fk(robot.q_rest, robot.hands["right"].grasp_frame)[:3, 3] - [0, 0, 0.11])
+    a, b = _q(problem, r_arm_j1=-0.5), _q(problem, r_arm_j1=0.5)
+    nodes = np.array([_q(problem, r_arm_j1=-0.45), _q(problem, r_arm_j1=0.45), _q(problem, r_arm_j2=0.7)])
+    full = static_world(problem, X_WO)
+    assert path_collisions(full, [a, b], problem) and path_collisions(full, nodes[[0, 1]], problem)
+    assert not path_collisions(full, nodes[[0, 2, 1]], problem)
+    weights = joint_weights(robot)
+    edges = np.array([[0, 1], [0, 2], [2, 1]])
+    lengths = np.array([float(distance(nodes[u], nodes[v], weights)) for u, v in edges])
+    assert lengths[0] < lengths[1] + lengths[2]  # the blocked edge is the short way
+    return X_WO, a, b, Roadmap(nodes=nodes, edges=edges, lengths=lengths, weights=weights)
+
+
+def _query(problem, blocked, seed: int = 0, **options) -> tuple[np.ndarray, QueryStats]:
+    X_WO, a, b, rm = blocked
+    scratch = new_scratch(problem, seed, **options)
+    open_ = {h: problem.robot.hands[h].open for h in problem.robot.hands}
+    stats = QueryStats()
+    return roadmap_query(scratch, rm, a, b, phase_worlds(scratch, X_WO, None, open_), stats), stats
+
+
+def test_roadmap_query_hides_the_blocked_edge_and_takes_the_detour(problem, blocked):
+    """With one connection per end and no smoothing the answer is exact: [a, n0, n2, n1, b],
+    after one invalid edge and two searches; the roadmap itself is left as it was."""
+    X_WO, a, b, rm = blocked
+    before = {k: getattr(rm, k).copy() for k in ("nodes", "edges", "lengths", "weights")}
+    path, stats = _query(problem, blocked, connections=1, shortcut_iterations=0)
+    n0, n1, n2 = rm.nodes
+    assert np.array_equal(path, np.array([a, n0, n2, n1, b]))
+    assert (stats.searches, stats.invalid_edges, stats.rrt_calls) == (2, 1, 0)
+    assert not path_collisions(static_world(problem, X_WO), path, problem)
+    for k, v in before.items():  # the memo is beside the roadmap, not in it
+        assert np.array_equal(getattr(rm, k), v), k
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_roadmap_query_with_default_options_stays_collision_free(problem, blocked, seed):
+    """The same query with the default options (more connections, shortcuts): whatever
+    path comes back joins a to b without touching the object."""
+    X_WO, a, b, _ = blocked
+    path, stats = _query(problem, blocked, seed)
+    assert np.array_equal(path[0], a) and np.array_equal(path[-1], b)
+    assert stats.invalid_edges >= 1 and stats.searches >= 2
+    assert not path_collisions(static_world(problem, X_WO), path, problem)
