@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import connected_components, dijkstra
 
 from regrasp_cli.plan.context import Placed, Scratch
 from regrasp_cli.roadmap.build import RoadmapArtefact
@@ -59,12 +59,21 @@ class Roadmap:
     edges: np.ndarray  # (k, 2) node indices
     lengths: np.ndarray  # (k,) weighted joint-space lengths
     weights: np.ndarray  # (nq,)
+    giant: np.ndarray  # (g,) indices of the nodes of the largest connected component
 
     @classmethod
     def of(cls, art: RoadmapArtefact) -> "Roadmap":
         g = art.graph
-        return cls(g.nodes, np.asarray(g.edges, dtype=np.int64).reshape(-1, 2), np.asarray(g.lengths, float),
-                   art.weights)
+        return cls.from_arrays(g.nodes, g.edges, g.lengths, art.weights)
+
+    @classmethod
+    def from_arrays(cls, nodes: np.ndarray, edges, lengths, weights: np.ndarray) -> "Roadmap":
+        edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        m = len(nodes)
+        adjacency = csr_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(m, m))
+        _, label = connected_components(adjacency, directed=False)
+        giant = np.flatnonzero(label == np.bincount(label).argmax()) if m else np.zeros(0, dtype=np.int64)
+        return cls(np.asarray(nodes, float), edges, np.asarray(lengths, float), np.asarray(weights, float), giant)
 
     def shortest_path(self, sources: list[tuple[int, float]], targets: list[tuple[int, float]],
                       memo: QueryMemo) -> list[int] | None:
@@ -153,7 +162,7 @@ def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: Placed, fingers
     nodes, parent = [q], [-1]
     for _ in range(o.escape_iterations):
         if scratch.rng.random() < 0.3:  # towards a random roadmap node
-            target = q_of(int(scratch.rng.integers(len(rm.nodes))))
+            target = q_of(int(rm.giant[scratch.rng.integers(len(rm.giant))]))
         else:
             target = _with_fingers(scratch, robot.sample(scratch.rng, moving, base=q), fingers)
         d = distance(target, np.asarray(nodes), rm.weights)
@@ -164,8 +173,8 @@ def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: Placed, fingers
             continue
         nodes.append(new)
         parent.append(i)
-        dn = distance(new, rm.nodes, rm.weights)
-        for j in np.argsort(dn, kind="stable")[:3]:
+        dn = distance(new, rm.nodes[rm.giant], rm.weights)
+        for j in rm.giant[np.argsort(dn, kind="stable")[:3]]:
             j = int(j)
             if node_free(j) and scratch.segment_free(world, new, q_of(j)):
                 branch, k = [], len(nodes) - 1
@@ -173,7 +182,7 @@ def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: Placed, fingers
                     branch.append(nodes[k])
                     k = parent[k]
                 stats.nodes += len(nodes)
-                return branch[::-1], [(j, float(dn[j]))]
+                return branch[::-1], [(j, float(distance(new, rm.nodes[j], rm.weights)))]
     stats.nodes += len(nodes)
     return [], []
 
@@ -229,9 +238,12 @@ def roadmap_query(scratch: Scratch, rm: Roadmap, a: np.ndarray, b: np.ndarray, w
         return ok
 
     def ends(q: np.ndarray) -> list[tuple[int, float]]:
-        d = distance(q, rm.nodes, rm.weights)
+        # nodes of the largest component only: ends joined to two different components
+        # have no path between them (the Super Graph has ~170 components, one of ~86 %)
+        d = np.full(len(rm.nodes), np.inf)
+        d[rm.giant] = distance(q, rm.nodes[rm.giant], rm.weights)
         out = []
-        for i in np.argsort(d, kind="stable")[:o.k_connect]:
+        for i in np.argsort(d, kind="stable")[:min(o.k_connect, len(rm.giant))]:
             i = int(i)
             if node_free(i) and scratch.segment_free(full, q, q_of(i)):
                 out.append((i, float(d[i])))

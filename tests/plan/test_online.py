@@ -426,7 +426,7 @@ def blocked(problem):
     edges = np.array([[0, 1], [0, 2], [2, 1]])
     lengths = np.array([float(distance(nodes[u], nodes[v], weights)) for u, v in edges])
     assert lengths[0] < lengths[1] + lengths[2]  # the blocked edge is the short way
-    return X_WO, a, b, Roadmap(nodes=nodes, edges=edges, lengths=lengths, weights=weights)
+    return X_WO, a, b, Roadmap.from_arrays(nodes, edges, lengths, weights)
 
 
 def _query(problem, blocked, seed: int = 0, **options) -> tuple[np.ndarray, QueryStats]:
