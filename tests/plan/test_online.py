@@ -460,3 +460,17 @@ def test_roadmap_query_with_default_options_stays_collision_free(problem, blocke
     assert np.array_equal(path[0], a) and np.array_equal(path[-1], b)
     assert stats.invalid_edges >= 1 and stats.searches >= 2
     assert not path_collisions(static_world(problem, X_WO), path, problem)
+
+
+def test_no_reachable_exchange_pose_fails_at_exchange(problem, lists, monkeypatch):
+    # as if neither arm pair reached any sample around the exchange position
+    import regrasp_cli.plan.planner as planner
+
+    calls = []
+    monkeypatch.setattr(planner, "exchange_configuration", lambda *a, **k: calls.append(a[-1]) or None)
+    options = OnlineOptions(planner="rrt-connect", double_grasps_tried=2, exchange_samples=3)
+    out = run(problem, lists, None, options, seed=0)
+    assert out.failure is not None and out.failure.stage == "exchange"
+    assert "exchange pose" in out.failure.reason and "2 double grasps" in out.failure.reason
+    assert out.phases == [] and out.exchange is None
+    assert 1 <= len(calls) <= 2 * 3  # samples clear of the obstacles only, for at most 2 double grasps
