@@ -81,15 +81,14 @@ class Scratch:
         if w is None:
             p = self.problem
             obj = None if X_PO is None else ObjectPlacement(p.object.mesh, X_PO, attached, tuple(touching))
-            keep = pair_filter
-            if attached is not None:
-                # the holding hand and the object move as one (its fingers do not move while
-                # it holds): those pairs were checked when it closed, and cost the most
-                rigid = palm_and_finger_links(p.robot, attached)
-                base = pair_filter or (lambda a, b: True)
+            # the holding hand and the object move as one (its fingers do not move while it
+            # holds): those pairs were checked when it closed, and cost the most
+            rigid = palm_and_finger_links(p.robot, attached) if attached is not None else set()
+            base = pair_filter or (lambda a, b: True)
 
-                def keep(a, b, base=base, rigid=rigid):
-                    return base(a, b) and not ("object" in (a, b) and (a in rigid or b in rigid))
+            def keep(a, b):
+                return base(a, b) and not ("object" in (a, b) and (a in rigid or b in rigid))
+
             w = CollisionWorld(p.robot, p.spec.obstacles, p.disabled.links(), obj, p.collision_options,
                                pair_filter=keep)
             w.owner = None

@@ -204,7 +204,6 @@ def single_configuration(scratch: Scratch, grasps: GraspList, k: int, X_WO: np.n
     samples are exhausted."""
     p, o = scratch.problem, scratch.options
     robot, hand = p.robot, grasps.hand
-    h = robot.hands[hand]
     X_OG = grasps.X_OG[k]
     X_WG = X_WO @ X_OG
     w_free = scratch.world(X_WO)

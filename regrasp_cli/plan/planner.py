@@ -28,7 +28,7 @@ from regrasp_cli.errors import RegraspError
 from regrasp_cli.parallel import ordered_map, shared
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.plan.context import OnlineOptions, Scratch
-from regrasp_cli.plan.doublegrasp import DoubleGrasp, SingleStats, double_grasps, single_configurations
+from regrasp_cli.plan.doublegrasp import DoubleGrasp, double_grasps, single_configurations
 from regrasp_cli.plan.exchange import exchange_orientation, exchange_position, grid_nodes
 from regrasp_cli.plan.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, \
     palm_and_finger_links, static_geometry
