@@ -189,6 +189,27 @@ def _query_job(name: str):
         return name, None, qs, str(exc), scratch.checks - before
 
 
+def _double_grasps(scratch: Scratch, lists: dict[str, GraspList], shapes: dict, env: StaticGeometry, g: str,
+                   seed: int, options: OnlineOptions, out: Outcome, record: bool) -> list[DoubleGrasp] | str:
+    """Double grasps with hand ``g`` picking, best first, or why there are none."""
+    task, t = scratch.problem.spec.task, OTHER[g]
+    # the two hands' searches are independent: in parallel, each with its own random stream
+    job = {"scratch": scratch, "seed": seed, "singles": {g: (lists[g], shapes[g], task.X_WO_start, env),
+                                                         t: (lists[t], shapes[t], task.X_WO_goal, env)}}
+    (cfg_g, st_g, n_g), (cfg_t, st_t, n_t) = ordered_map(_single_job, [g, t], options.jobs, job)
+    out.stats["single_checks"] = out.stats.get("single_checks", 0) + n_g + n_t
+    scratch.rng = np.random.default_rng([seed, 20])  # the same stream after, whatever the jobs
+    if record or (cfg_g and cfg_t):
+        out.stats["single_grasps"] = {g: st_g.__dict__, t: st_t.__dict__}
+    for hand, cfgs, st, where in ((g, cfg_g, st_g, "start"), (t, cfg_t, st_t, "goal")):
+        if not cfgs:
+            return (f"no collision-free {hand}-hand grasp configuration at the object's {where} pose "
+                    f"({st.environment_free} of {st.listed} grasps clear the obstacles, {st.tried} tried with IK)")
+    doubles = double_grasps(cfg_g, lists[g], shapes[g], cfg_t, lists[t], shapes[t])
+    out.stats["double_grasps"] = len(doubles)
+    return doubles or f"all {len(cfg_g)} x {len(cfg_t)} grasp pairs make the hands collide"
+
+
 def run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
         seed: int) -> Outcome:
     """Plan the pick, hand-over and place; never raises PlanningFailed (see ``failure``)."""
@@ -218,29 +239,22 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
             raise PlanningFailed(stage, f"the robot's {what} configuration is in collision ({pairs})")
 
     # ---------------------------------------------------------------- double grasps
-    g = picking_hand(problem, scratch)
-    t = OTHER[g]
-    out.giver = g
     env = static_geometry(problem.spec.obstacles)
-    shapes = {h: hand_shapes(robot, h, lists[h].finger_q) for h in (g, t)}
-    # the two hands' searches are independent: in parallel, each with its own random stream
-    job = {"scratch": scratch, "seed": seed, "singles": {g: (lists[g], shapes[g], task.X_WO_start, env),
-                                                         t: (lists[t], shapes[t], task.X_WO_goal, env)}}
-    (cfg_g, st_g, n_g), (cfg_t, st_t, n_t) = ordered_map(_single_job, [g, t], options.jobs, job)
-    out.stats["single_checks"] = n_g + n_t
-    scratch.rng = np.random.default_rng([seed, 20])  # the same stream after, whatever the jobs
-    out.stats["single_grasps"] = {g: st_g.__dict__, t: st_t.__dict__}
-    for hand, cfgs, st, where in ((g, cfg_g, st_g, "start"), (t, cfg_t, st_t, "goal")):
-        if not cfgs:
-            t0 = _clock(out, "double grasps", t0)
-            raise PlanningFailed("double grasps", f"no collision-free {hand}-hand grasp configuration at the object's "
-                                 f"{where} pose ({st.environment_free} of {st.listed} grasps clear the obstacles, "
-                                 f"{st.tried} tried with IK)")
-    doubles = double_grasps(cfg_g, lists[g], shapes[g], cfg_t, lists[t], shapes[t])
-    out.stats["double_grasps"] = len(doubles)
+    shapes = {h: hand_shapes(robot, h, lists[h].finger_q) for h in ("right", "left")}
+    guess = picking_hand(problem, scratch)
+    failures = []
+    for g in (guess, OTHER[guess]):  # the nearer hand first; the other when it cannot
+        found = _double_grasps(scratch, lists, shapes, env, g, seed, options, out, record=not failures)
+        if isinstance(found, list):
+            doubles, t = found, OTHER[g]
+            break
+        failures.append(found)
+    else:
+        _clock(out, "double grasps", t0)
+        raise PlanningFailed("double grasps", f"{failures[0]}; with the {OTHER[guess]} hand picking instead: "
+                                              f"{failures[1]}")
+    out.giver = g
     t0 = _clock(out, "double grasps", t0)
-    if not doubles:
-        raise PlanningFailed("double grasps", f"all {len(cfg_g)} x {len(cfg_t)} grasp pairs make the hands collide")
 
     # ---------------------------------------------------------------- exchange
     obj = _object_shape(problem)

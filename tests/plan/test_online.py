@@ -474,3 +474,14 @@ def test_no_reachable_exchange_pose_fails_at_exchange(problem, lists, monkeypatc
     assert "exchange pose" in out.failure.reason and "2 double grasps" in out.failure.reason
     assert out.phases == [] and out.exchange is None
     assert 1 <= len(calls) <= 2 * 3  # samples clear of the obstacles only, for at most 2 double grasps
+
+
+def test_the_other_hand_picks_when_the_nearer_one_cannot(problem, lists, monkeypatch):
+    import regrasp_cli.plan.planner as planner
+
+    monkeypatch.setattr(planner, "picking_hand", lambda *a: "left")  # a wrong guess: the start is on the right
+    monkeypatch.setattr(planner, "exchange_configuration", lambda *a, **k: None)  # stop after the double grasps
+    out = run(problem, lists, None, OnlineOptions(planner="rrt-connect", double_grasps_tried=1, exchange_samples=1),
+              seed=0)
+    assert out.giver == "right" and out.failure.stage == "exchange"
+    assert out.stats["single_grasps"]["right"]["kept"] > 0 and out.stats["double_grasps"] > 0
