@@ -128,8 +128,10 @@ def make_plan(problem: Problem, lists: dict[str, GraspList], outcome: Outcome, o
 def print_summary(plan: Plan, outcome: Outcome, console: Console) -> None:
     """Table I of the paper, one row per query: nodes and seconds of the online planning
     (search, connections, repairs, smoothing) and of the lazy path validation."""
-    t = Table(title=f"Online planning ({plan.planner}, seed {plan.seed})")
-    for c in ("query", "planning n", "planning T (s)", "validation n", "validation T (s)", "total T (s)"):
+    t = Table(title=f"Online planning ({plan.planner}, seed {plan.seed}): n nodes, T seconds",
+              caption="planning: search, connections, repairs, smoothing; validation: lazy checks "
+                      "(n: invalid edges found)")
+    for c in ("query", "planning n", "planning T", "validation n", "validation T", "total T"):
         t.add_column(c, justify="right")
     qs, tm = outcome.stats.get("queries", {}), outcome.timing
     for q in QUERIES:

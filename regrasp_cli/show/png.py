@@ -71,7 +71,7 @@ def _cube(ax, lo: np.ndarray, hi: np.ndarray, margin: float = 0.03) -> None:
     ax.set_xlim(centre[0] - half, centre[0] + half)
     ax.set_ylim(centre[1] - half, centre[1] + half)
     ax.set_zlim(centre[2] - half, centre[2] + half)
-    ax.set_box_aspect((1, 1, 1), zoom=1.35)
+    ax.set_box_aspect((1, 1, 1), zoom=1.5)
 
 
 def _draw_soup(ax, Poly3DCollection, soup: Soup, zorder: int = 1, edges: bool = True) -> None:
@@ -79,13 +79,13 @@ def _draw_soup(ax, Poly3DCollection, soup: Soup, zorder: int = 1, edges: bool = 
     pc = Poly3DCollection(soup.triangles, facecolors=colours, edgecolors=colours if edges else "none",
                           linewidths=0.15 if edges else 0.0)
     pc.set_zorder(zorder)
+    pc.set_clip_on(False)  # the 3D box is drawn in a square; let a wide scene use the whole picture
     ax.add_collection3d(pc)
 
 
-def _floor(lo: np.ndarray, hi: np.ndarray, z: float = 0.0) -> Soup:
-    """A floor square under the scene at height z (m)."""
-    centre, half = (lo[:2] + hi[:2]) / 2, (hi - lo).max() / 2
-    x0, y0, x1, y1 = centre[0] - half, centre[1] - half, centre[0] + half, centre[1] + half
+def _floor(lo: np.ndarray, hi: np.ndarray, z: float = 0.0, margin: float = 0.2) -> Soup:
+    """A floor rectangle under the scene's bounds [lo, hi] at height z, ``margin`` wider (m)."""
+    x0, y0, x1, y1 = lo[0] - margin, lo[1] - margin, hi[0] + margin, hi[1] + margin
     quad = np.array([[[x0, y0, z], [x1, y0, z], [x1, y1, z]], [[x0, y0, z], [x1, y1, z], [x0, y1, z]]])
     return Soup(quad, np.tile(FLOOR_RGBA, (2, 1))).subdivided(4 * MAX_EDGE)
 
