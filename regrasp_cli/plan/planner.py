@@ -225,7 +225,7 @@ def run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, 
 def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
          seed: int, out: Outcome) -> None:
     robot = problem.robot
-    scratch = Scratch(problem, options, np.random.default_rng([seed, 20]))  # reset after the singles
+    scratch = Scratch(problem, options, np.random.default_rng([seed, 20]))  # each parallel stage has its own
     task = problem.spec.task
     weights = roadmap.weights if roadmap is not None else joint_weights(robot)
     t0 = time.perf_counter()
