@@ -25,12 +25,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.sparse.csgraph import connected_components
 
 from regrasp_cli.plan.context import Placed, Scratch
 from regrasp_cli.roadmap.build import RoadmapArtefact
 from regrasp_cli.roadmap.local import distance
-from regrasp_cli.roadmap.query import QueryMemo
+from regrasp_cli.roadmap.query import QueryMemo, shortest_path
 from regrasp_cli.roadmap.rrt import rrt_connect, shortcut
 
 
@@ -77,36 +77,7 @@ class Roadmap:
 
     def shortest_path(self, sources: list[tuple[int, float]], targets: list[tuple[int, float]],
                       memo: QueryMemo) -> list[int] | None:
-        """Shortest node path from any source to any target (each with the length of its
-        connection), without the nodes and edges ``memo`` hides; None when there is none.
-        Dijkstra (scipy's) from a virtual node joined to the sources to one joined to the
-        targets."""
-        m = len(self.nodes)
-        keep = np.ones(len(self.edges), dtype=bool)
-        if memo.invalid_nodes:
-            bad = np.fromiter(memo.invalid_nodes, dtype=np.int64)
-            keep &= ~np.isin(self.edges, bad).any(axis=1)
-        if memo.invalid_edges:
-            hidden = {tuple(sorted(e)) for e in memo.invalid_edges}
-            keep &= np.array([(int(a), int(b)) not in hidden for a, b in np.sort(self.edges, axis=1)])
-        e, w = self.edges[keep], self.lengths[keep] + 1e-12  # csgraph drops zero weights
-        S, T = m, m + 1
-        src = [(i, d) for i, d in sources if i not in memo.invalid_nodes]
-        dst = [(i, d) for i, d in targets if i not in memo.invalid_nodes]
-        if not src or not dst:
-            return None
-        rows = np.concatenate([e[:, 0], e[:, 1], np.full(len(src), S), [i for i, _ in dst]])
-        cols = np.concatenate([e[:, 1], e[:, 0], [i for i, _ in src], np.full(len(dst), T)])
-        data = np.concatenate([w, w, [d + 1e-12 for _, d in src], [d + 1e-12 for _, d in dst]])
-        graph = csr_matrix((data, (rows.astype(np.int64), cols.astype(np.int64))), shape=(m + 2, m + 2))
-        dist, pred = dijkstra(graph, directed=True, indices=S, return_predecessors=True)
-        if not np.isfinite(dist[T]):
-            return None
-        path, k = [], int(pred[T])
-        while k != S:
-            path.append(k)
-            k = int(pred[k])
-        return path[::-1]
+        return shortest_path(self.edges, self.lengths, len(self.nodes), sources, targets, memo)
 
 
 @dataclass(frozen=True)

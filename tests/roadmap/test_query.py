@@ -1,78 +1,37 @@
-"""Query helpers over the Super Graph (regrasp_cli.roadmap.query): connecting a
-configuration to its nearest nodes, and shortest paths that skip what a QueryMemo hides
-without modifying the graph."""
+"""Shortest paths over the Super Graph (regrasp_cli.roadmap.query) that skip what a
+QueryMemo hides without modifying the graph."""
 
 from __future__ import annotations
 
-import networkx as nx
 import numpy as np
 import pytest
 
-from regrasp_cli.roadmap.query import QueryMemo, connect, shortest_path
-
-# --------------------------------------------------------------------------- connect
-
-NODES = np.array([[3.0, 0.0], [1.0, 0.0], [-2.0, 0.0], [0.0, 4.0], [0.5, 0.0]])
-W = np.ones(2)
-
-
-def blocked_at(*bad: int):
-    calls = []
-
-    def segment_free(q0, q1):
-        calls.append(q1.copy())
-        return not any(np.array_equal(q1, NODES[b]) for b in bad)
-
-    return segment_free, calls
-
-
-def test_connect_returns_joined_nodes_nearest_first():
-    seg, calls = blocked_at(1)
-    got = connect(NODES, np.zeros(2), W, seg, k=10)
-    # distances: 4 -> 0.5, 1 -> 1 (blocked), 2 -> 2, 0 -> 3, 3 -> 4
-    assert [i for i, _ in got] == [4, 2, 0, 3]
-    assert [d for _, d in got] == pytest.approx([0.5, 2.0, 3.0, 4.0])
-    assert len(calls) == 5
-    assert all(isinstance(i, int) and isinstance(d, float) for i, d in got)
-
-
-def test_connect_only_tries_the_k_nearest():
-    seg, calls = blocked_at(4)
-    got = connect(NODES, np.zeros(2), W, seg, k=3)
-    assert [i for i, _ in got] == [1, 2]
-    assert len(calls) == 3
-
-
-def test_connect_uses_the_weights():
-    seg, _ = blocked_at()
-    got = connect(NODES, np.zeros(2), np.array([1.0, 0.01]), seg, k=2)  # y is cheap: node 3 at 0.4
-    assert [i for i, _ in got] == [3, 4]
-    assert got[0][1] == pytest.approx(0.4)
-
-
-def test_connect_skips_invalid_nodes_without_checking_them():
-    seg, calls = blocked_at()
-    memo = QueryMemo(invalid_nodes={4, 0})
-    got = connect(NODES, np.zeros(2), W, seg, k=10, memo=memo)
-    assert [i for i, _ in got] == [1, 2, 3]
-    assert len(calls) == 3
-
+from regrasp_cli.roadmap import query
+from regrasp_cli.roadmap.query import QueryMemo
 
 # --------------------------------------------------------------------------- shortest_path
 
 
-@pytest.fixture
-def graph() -> nx.Graph:
+class Graph:
     """0 -1- 1 -1- 2 -1- 5, 0 -2- 3 -2- 5, 0 -10- 4 -10- 5, 6 alone."""
-    g = nx.Graph()
-    g.add_nodes_from(range(7))
-    for a, b, w in ((0, 1, 1.0), (1, 2, 1.0), (2, 5, 1.0), (0, 3, 2.0), (3, 5, 2.0), (0, 4, 10.0), (4, 5, 10.0)):
-        g.add_edge(a, b, length=w)
-    return g
+
+    def __init__(self):
+        e = ((0, 1, 1.0), (1, 2, 1.0), (2, 5, 1.0), (0, 3, 2.0), (3, 5, 2.0), (0, 4, 10.0), (4, 5, 10.0))
+        self.edges = np.array([(a, b) for a, b, _ in e])
+        self.lengths = np.array([w for _, _, w in e])
 
 
-def snapshot(g: nx.Graph):
-    return sorted(g.nodes(data=True)), sorted((min(a, b), max(a, b), dict(d)) for a, b, d in g.edges(data=True))
+@pytest.fixture
+def graph() -> Graph:
+    return Graph()
+
+
+def snapshot(g: Graph):
+    return g.edges.tolist(), g.lengths.tolist()
+
+
+def shortest_path(g: Graph, sources, targets, memo=None):
+    return query.shortest_path(g.edges, g.lengths, 7, sources, targets, memo)
 
 
 def test_shortest_path_known(graph):
@@ -119,28 +78,25 @@ def test_shortest_path_ignores_unknown_sources(graph):
     assert shortest_path(graph, [(99, 0.0), (0, 0.0)], [(5, 0.0)]) == [0, 1, 2, 5]
 
 
-def test_memo_weight():
-    memo = QueryMemo(invalid_nodes={3}, invalid_edges={frozenset((1, 2))})
-    assert memo.weight(0, 1, {"length": 2.5}) == 2.5
-    assert memo.weight(2, 1, {"length": 2.5}) is None
-    assert memo.weight(3, 0, {"length": 2.5}) is None
-    assert QueryMemo().valid_edges == set()
-
-
 def test_shortest_path_on_a_built_super_graph_is_a_chain_of_edges():
-    """A real (tiny) Super Graph through the same helpers: the path follows stored edges."""
-    from regrasp_cli.roadmap.compose import SuperGraph
+    """A real (tiny) Super Graph through the planner's Roadmap: the path follows stored edges."""
+    from regrasp_cli.plan.queries import Roadmap as QueryRoadmap
     from regrasp_cli.roadmap.build import RoadmapArtefact
+    from regrasp_cli.roadmap.compose import SuperGraph
     from regrasp_cli.roadmap.visprm import Roadmap
 
-    nodes = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    nodes = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [5.0, 5.0]])
     edges = np.array([[0, 1], [1, 2], [2, 3]])
     empty = Roadmap(np.zeros((0, 2)), np.zeros((0, 2), dtype=np.int64), np.zeros(0), np.zeros(0, dtype=bool), 0)
-    art = RoadmapArtefact(empty, empty, SuperGraph(nodes, np.zeros((4, 3), dtype=np.int64), edges,
-                                                   np.ones(3), 4, 3), ("a", "b"), np.ones(2))
-    g = art.networkx()
-    assert nx.get_edge_attributes(g, "length") == {(0, 1): 1.0, (1, 2): 1.0, (2, 3): 1.0}
-    start = connect(nodes, np.array([-0.1, 0.0]), art.weights, lambda a, b: True, k=1)
-    goal = connect(nodes, np.array([-0.1, 1.0]), art.weights, lambda a, b: True, k=1)
-    assert start == [(0, pytest.approx(0.1))] and goal == [(3, pytest.approx(0.1))]
-    assert shortest_path(g, start, goal) == [0, 1, 2, 3]
+    art = RoadmapArtefact(empty, empty, SuperGraph(nodes, np.zeros((5, 3), dtype=np.int64), edges,
+                                                   np.ones(3), 5, 3), ("a", "b"), np.ones(2))
+    rm = QueryRoadmap.of(art)
+    assert rm.giant.tolist() == [0, 1, 2, 3]  # node 4 is a component of its own
+    assert rm.shortest_path([(0, 0.1)], [(3, 0.1)], QueryMemo()) == [0, 1, 2, 3]
+    assert rm.shortest_path([(0, 0.1)], [(4, 0.1)], QueryMemo()) is None
+
+
+def test_shortest_path_takes_the_shortest_of_two_connections_to_one_node(graph):
+    # two connections to node 0 (lengths 5 and 1): the shorter one counts
+    assert shortest_path(graph, [(0, 5.0), (0, 1.0), (4, 0.5)], [(5, 0.0)]) == [0, 1, 2, 5]
+    assert shortest_path(graph, [(0, 9.0), (0, 8.0), (4, 0.5)], [(5, 0.0)]) == [4, 5]
