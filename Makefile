@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 SCENE := configs/scenes/desk_handover.yaml
 
-.PHONY: demo test setup bench-collision bench-grasps bench-roadmap bench-plan clean
+.PHONY: demo test setup browser bench-collision bench-grasps bench-roadmap bench-plan clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -21,9 +21,21 @@ demo: setup
 	$(BIN)/regrasp roadmap build $(SCENE)
 	$(BIN)/regrasp plan $(SCENE) -o plan.json
 	$(BIN)/regrasp validate plan.json
+	$(BIN)/regrasp show plan.json --html plan.html --png plan_frames
 
-test: setup
+test: setup browser
 	$(BIN)/python -m pytest
+
+# Headless Chromium for the browser test (tests/show/test_browser.py), from Debian's
+# packages when missing and this is root with apt-get; never fails the build (the test
+# is then skipped and says why).
+browser:
+	@if command -v chromium >/dev/null && command -v chromedriver >/dev/null; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	  echo "installing chromium and chromium-driver for the browser test"; \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver) \
+	    >/dev/null 2>&1 || echo "note: chromium could not be installed; the browser test will be skipped"; \
+	else echo "note: chromium is missing and not installable here (needs root and apt-get); the browser test will be skipped"; fi
 
 bench-collision: setup
 	$(BIN)/python scripts/bench_collision.py

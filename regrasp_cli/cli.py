@@ -86,15 +86,24 @@ def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, j
 
 @grasps.command("show")
 @click.argument("file", type=click.Path(path_type=Path))
-@click.option("--best", type=int, default=10, show_default=True, help="How many grasps to list.")
+@click.option("--best", type=int, default=10, show_default=True, help="How many grasps to list (and to draw).")
 @click.option("--scene", type=click.Path(path_type=Path), default=None,
               help="Check the file against this scene's robot, object and options; refuse it if stale.")
+@click.option("--png", type=click.Path(path_type=Path), default=None, metavar="FILE",
+              help="Also draw the best grasps on the object (hand, grasp frame, contacts and normals) into this "
+                   "PNG; needs --scene.")
 @click.pass_context
-def grasps_show(ctx: click.Context, file: Path, best: int, scene: Path | None) -> None:
-    """Print the stored provenance and the best grasps of a grasp list."""
+def grasps_show(ctx: click.Context, file: Path, best: int, scene: Path | None, png: Path | None) -> None:
+    """Print the stored provenance and the best grasps of a grasp list; draw them with --png."""
     from regrasp_cli.report import show_grasps
+    from regrasp_cli.show.command import check_grasps_png
 
+    check_grasps_png(png, scene, best)
     show_grasps(file, best, scene, ctx.obj["cache_dir"])
+    if png is not None:
+        from regrasp_cli.show.command import run_grasps_png
+
+        click.echo(f"png: {run_grasps_png(file, best, scene, ctx.obj['cache_dir'], png)}")
 
 
 @main.group()
@@ -176,6 +185,23 @@ def validate(plan_file: Path, resolution: float, cartesian_step: float) -> None:
     print_validation(report, Console())
     if not report.valid:
         sys.exit(1)
+
+
+@main.command()
+@click.argument("plan_file", metavar="PLAN", type=click.Path(path_type=Path))
+@click.option("--html", "html_file", type=click.Path(path_type=Path), default=None, metavar="FILE",
+              help="Write an animated 3D view of the plan: one self-contained HTML file (no server, no network).")
+@click.option("--png", "png_dir", type=click.Path(path_type=Path), default=None, metavar="DIR",
+              help="Write the key frames (01_start, 02_pick, 03_exchange, 04_place, 05_end) as PNG into DIR.")
+@click.option("--fps", type=int, default=25, show_default=True, help="Samples per second of the animation.")
+@click.option("--size", default="960x720", show_default=True, metavar="WxH", help="Size of the PNG pictures (pixels).")
+@click.option("--geometry", type=click.Choice(["visual", "collision"]), default="visual", show_default=True,
+              help="Draw the robot's visual geometry, or the collision geometry the planner checked.")
+def show(plan_file: Path, html_file: Path | None, png_dir: Path | None, fps: int, size: str, geometry: str) -> None:
+    """Look at a plan: an animated 3D page and key-frame pictures.  Give --html, --png or both."""
+    from regrasp_cli.show.command import run_show
+
+    run_show(plan_file, html_file, png_dir, fps, size, geometry)
 
 
 if __name__ == "__main__":  # pragma: no cover

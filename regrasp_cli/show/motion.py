@@ -1,0 +1,211 @@
+"""A plan's motion for viewing: the robot's configuration and the object's pose over time,
+and the key frames (start, pick, exchange, place, end).
+
+Viewing only (not a paper section).  The plan is reloaded with the validator's loader
+(:func:`regrasp_cli.validate.load_inputs`: the robot, object and obstacles it names,
+refused when stale), and the object is followed through the phases as the validator does
+(:func:`regrasp_cli.validate.attachment_issues`): it rests where it is while no hand holds
+it, otherwise ``X_WO = X_WG(q) @ X_GO`` with X_GO fixed at the phase start.  Between
+waypoints the robot moves on straight joint-space segments with the trapezoidal timing of
+:mod:`regrasp_cli.plan.timing`, evaluated at the plan's waypoint times.
+
+Times are seconds from the plan start; configurations (nq,) in the plan's joint order
+(rad or m); poses 4x4 in the robot base frame W (m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from regrasp_cli.errors import InputError
+from regrasp_cli.plan.timing import evaluate_trajectory
+from regrasp_cli.show.geometry import (LinkShapes, Soup, link_poses, mesh_shape, obstacle_shapes, robot_links,
+                                       robot_soup, shapes_soup)
+from regrasp_cli.trajectory import Plan, read_plan
+from regrasp_cli.validate import Carry, Inputs, attachment_issues, load_inputs
+
+KEY_FRAMES = ("start", "pick", "exchange", "place", "end")
+MAX_FPS = 120
+
+
+@dataclass(frozen=True, eq=False)
+class PlanView:
+    """A solved plan with what it refers to, loaded for drawing."""
+
+    file: Path
+    plan: Plan
+    inputs: Inputs  # robot, object mesh (frame O), obstacles, timing limits
+    carries: tuple[Carry, ...]  # per phase: the object static in W, or held by a hand
+
+    @property
+    def duration(self) -> float:
+        return self.plan.duration
+
+    def X_WO(self, phase: int, q: np.ndarray) -> np.ndarray:
+        """Object pose (4, 4) during phase ``phase`` at configuration q (nq,)."""
+        return self.carries[phase].X_WO(self.inputs.robot, q)
+
+
+@dataclass(frozen=True, eq=False)
+class Motion:
+    """The motion sampled at times t (m,): configurations q (m, nq), the phase index of
+    each sample (m,) and the object pose X_WO (m, 4, 4)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    phase: np.ndarray
+    X_WO: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class KeyFrame:
+    """A moment worth a picture: ``name`` (one of :data:`KEY_FRAMES`), the phase it ends
+    (or starts, for ``start``), its time t (s), the configuration q (nq,) and X_WO (4, 4)."""
+
+    name: str
+    phase: int
+    t: float
+    q: np.ndarray
+    X_WO: np.ndarray
+
+
+def load_plan_view(path: str | Path) -> PlanView:
+    """Read a plan and what it names.
+
+    Raises:
+        InputError: unreadable, malformed or stale plan (as ``regrasp validate``), a failed
+            plan, or a plan without motion.
+    """
+    path = Path(path)
+    plan = read_plan(path)
+    if plan.status != "solved":
+        f = plan.failure if isinstance(plan.failure, dict) else {}
+        raise InputError(path, "status", f"the plan failed at stage {f.get('stage', '?')} "
+                                         f"({f.get('reason', 'no reason given')}): there is no motion to show")
+    if not plan.phases:
+        raise InputError(path, "phases", "no phase: there is no motion to show")
+    if "start" not in plan.object_poses:
+        raise InputError(path, "object_poses.start", "missing")
+    inputs = load_inputs(plan, path)
+    X_WO = plan.object_poses["start"]
+    carries = []
+    for phase in plan.phases:
+        carry, _ = attachment_issues(plan, phase, inputs.robot, X_WO)  # issues are the validator's business
+        carries.append(carry)
+        X_WO = carry.X_WO(inputs.robot, phase.waypoints[-1])
+    return PlanView(path, plan, inputs, tuple(carries))
+
+
+def sample_times(view: PlanView, fps: float) -> np.ndarray:
+    """Times (s) at ``fps`` per second from 0 to the plan's end, plus every waypoint time
+    (where the robot stops), sorted and without duplicates."""
+    if not (np.isfinite(fps) and 0 < fps <= MAX_FPS):
+        raise ValueError(f"fps must be in (0, {MAX_FPS}], got {fps}")
+    T = view.duration
+    t = np.concatenate([np.arange(0.0, T, 1.0 / fps), [T], *(p.times for p in view.plan.phases)])
+    t = np.unique(np.round(t, 9))
+    return t[(t >= 0.0) & (t <= T)]
+
+
+def phase_at(view: PlanView, t: np.ndarray) -> np.ndarray:
+    """Index of the phase each time (m,) falls in: the last phase starting at or before
+    it.  A time on a boundary thus belongs to the phase that starts there (the
+    configuration and the object pose agree there), and a phase of zero duration gets no
+    time unless it is the last."""
+    starts = np.array([p.times[0] for p in view.plan.phases])
+    return np.clip(np.searchsorted(starts, t, side="right") - 1, 0, len(starts) - 1)
+
+
+def sample_motion(view: PlanView, fps: float = 25.0) -> Motion:
+    """The motion at the times of :func:`sample_times`.
+
+    Raises:
+        InputError: a phase's times do not fit its waypoints under the plan's limits.
+    """
+    t = sample_times(view, fps)
+    k = phase_at(view, t)
+    robot = view.inputs.robot
+    q = np.empty((len(t), robot.nq))
+    X_WO = np.empty((len(t), 4, 4))
+    for i, phase in enumerate(view.plan.phases):
+        rows = np.flatnonzero(k == i)
+        if not len(rows):
+            continue
+        try:
+            q[rows], _ = evaluate_trajectory(phase.waypoints, phase.times, view.inputs.velocity,
+                                             view.inputs.acceleration, t[rows])
+        except ValueError as exc:
+            raise InputError(view.file, f"phases[{i}].times", str(exc)) from None
+        for r in rows:
+            X_WO[r] = view.X_WO(i, q[r])
+    return Motion(t, q, k, X_WO)
+
+
+def key_frames(view: PlanView) -> tuple[KeyFrame, ...]:
+    """The plan's key frames, in time order: ``start`` (first waypoint), ``pick`` (end of
+    the first ``close_*`` phase: the first hand closed on the object), ``exchange`` (end of
+    the second ``close_*``: both hands on it at the exchange pose), ``place`` (end of
+    ``place``: the object on its goal), ``end`` (last waypoint).  A key frame whose phase
+    the plan does not have is left out."""
+    phases = view.plan.phases
+    closes = [i for i, p in enumerate(phases) if p.name.startswith("close_")]
+    place = [i for i, p in enumerate(phases) if p.name == "place"]
+    ends = {"pick": closes[0] if closes else None, "exchange": closes[1] if len(closes) > 1 else None,
+            "place": place[0] if place else None, "end": len(phases) - 1}
+    q0 = phases[0].waypoints[0]
+    out = [KeyFrame("start", 0, float(phases[0].times[0]), q0, view.X_WO(0, q0))]
+    for name in KEY_FRAMES[1:]:
+        i = ends[name]
+        if i is None:
+            continue
+        q = phases[i].waypoints[-1]
+        out.append(KeyFrame(name, i, float(phases[i].times[-1]), q, view.X_WO(i, q)))
+    return tuple(out)
+
+
+# ------------------------------------------------------------------ geometry at a moment
+
+
+@dataclass(frozen=True, eq=False)
+class PlanSoups:
+    """A plan's geometry triangulated once: the robot's links (each in its own frame),
+    the obstacles in W and the object in its frame O."""
+
+    links: tuple[LinkShapes, ...]
+    link_soups: tuple[Soup, ...]
+    obstacles: Soup
+    object: Soup
+
+
+def plan_soups(view: PlanView, source: str = "visual", max_edge: float | None = None,
+               max_faces: int | None = None) -> PlanSoups:
+    """Triangulate the plan's robot (``source``: visual or collision geometry; meshes
+    decimated to ``max_faces`` triangles), obstacles and object; with ``max_edge`` (m),
+    robot and obstacle triangles are cut to that size."""
+    links = robot_links(view.inputs.robot, source, max_faces)
+    cut = (lambda s: s) if max_edge is None else (lambda s: s.subdivided(max_edge))
+    return PlanSoups(links, tuple(cut(shapes_soup(ls.shapes)) for ls in links),
+                     cut(shapes_soup(obstacle_shapes(view.inputs.obstacles))),
+                     shapes_soup([mesh_shape("object", view.inputs.mesh)]))
+
+
+def frame_soup(view: PlanView, soups: PlanSoups, q: np.ndarray, X_WO: np.ndarray) -> Soup:
+    """Everything in W at configuration q (nq,) with the object at X_WO (4, 4)."""
+    X_WL = link_poses(view.inputs.robot, soups.links, q)
+    return Soup.join([soups.obstacles, robot_soup(soups.links, X_WL, soups.link_soups), soups.object.moved(X_WO)])
+
+
+def holding_text(holding: tuple[str, ...], touching: tuple[str, ...]) -> str:
+    """Words for who has the object in a phase, e.g. ``held by the right hand``."""
+    if holding:
+        hands = " and ".join(dict.fromkeys(holding))
+        text = f"held by the {hands} hand" + ("s" if len(set(holding)) > 1 else "")
+    else:
+        text = "at rest"
+    others = [h for h in dict.fromkeys(touching) if h not in holding]
+    if others:
+        text += f"; {' and '.join(others)} fingers on it"
+    return text
