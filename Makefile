@@ -33,7 +33,7 @@ browser:
 	@if command -v chromium >/dev/null && command -v chromedriver >/dev/null; then :; \
 	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 	  echo "installing chromium and chromium-driver for the browser test"; \
-	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver) \
+	  (timeout 300 apt-get update -qq && DEBIAN_FRONTEND=noninteractive timeout 600 apt-get install -y -qq chromium chromium-driver) \
 	    >/dev/null 2>&1 || echo "note: chromium could not be installed; the browser test will be skipped"; \
 	else echo "note: chromium is missing and not installable here (needs root and apt-get); the browser test will be skipped"; fi
 
