@@ -17,6 +17,7 @@ from rich.table import Table
 from regrasp_cli import __version__
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.plan.context import OnlineOptions
+from regrasp_cli.plan.ompl_peer import ompl_version
 from regrasp_cli.plan.planner import Outcome, PlanningFailed, run
 from regrasp_cli.plan.queries import Roadmap
 from regrasp_cli.scene import Problem, load_problem
@@ -97,6 +98,8 @@ def make_plan(problem: Problem, lists: dict[str, GraspList], outcome: Outcome, o
         grasps = (_grasp(lists, dg.giver.hand, dg.giver.grasp, robot), _grasp(lists, dg.taker.hand, dg.taker.grasp, robot))
         poses["exchange"] = outcome.exchange.X_WO
     stats = {"software_version": __version__, "artefacts": hashes, "counts": outcome.stats}
+    if options.planner == "ompl-rrtconnect":
+        stats["ompl_version"] = ompl_version()
     if timings:
         table = {q: {"nodes": outcome.stats.get("queries", {}).get(q, {}).get("nodes", 0),
                      "planning_s": outcome.timing.get(f"{q} planning", 0.0),
@@ -128,7 +131,8 @@ def make_plan(problem: Problem, lists: dict[str, GraspList], outcome: Outcome, o
 def print_summary(plan: Plan, outcome: Outcome, console: Console) -> None:
     """Table I of the paper, one row per query: nodes and seconds of the online planning
     (search, connections, repairs, smoothing) and of the lazy path validation."""
-    t = Table(title=f"Online planning ({plan.planner}, seed {plan.seed}): n nodes, T seconds",
+    ompl = f" {plan.stats['ompl_version']}" if "ompl_version" in plan.stats else ""
+    t = Table(title=f"Online planning ({plan.planner}{ompl}, seed {plan.seed}): n nodes, T seconds",
               caption="planning: search, connections, repairs, smoothing; validation: lazy checks "
                       "(n: invalid edges found)")
     for c in ("query", "planning n", "planning T", "validation n", "validation T", "total T"):
@@ -152,6 +156,8 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     from regrasp_cli.validate import print_validation, validate_plan
 
     console = console or Console()
+    if planner == "ompl-rrtconnect":
+        ompl_version()  # InputError naming the extra before anything is loaded
     problem = load_problem(scene, cache_dir)
     lists, art, hashes = load_artefacts(scene, cache_dir, problem, build, jobs, planner == "roadmap", console,
                                         roadmap_nodes, grasp_target)

@@ -30,7 +30,8 @@ from regrasp_cli.scene import Problem
 class OnlineOptions:
     """Options of `regrasp plan` (metres, radians, seconds)."""
 
-    planner: str = "roadmap"  # or "rrt-connect": the single-query baseline of §VI
+    planner: str = "roadmap"  # or "rrt-connect": the single-query baseline of §VI, or its OMPL peer
+    # "ompl-rrtconnect" (optional extra; see plan/ompl_peer.py)
     jobs: int = 2  # processes for the four queries (the result does not depend on it)
     approach_distance: float = 0.08  # pre-grasp offset of the hand before it closes
     lift_height: float = 0.06  # the object is lifted (and lowered) vertically by this
@@ -52,6 +53,7 @@ class OnlineOptions:
     escape_iterations: int = 1500  # tree growth from an end that no node sees
     repairs: int = 30  # graph re-searches per query before RRT-Connect takes over
     rrt: RRTOptions = RRTOptions(step=0.4, max_iterations=3000)
+    ompl_time: float = 10.0  # s: wall-clock guard of an ompl-rrtconnect query (its budget is rrt.max_iterations)
     shortcut_iterations: int = 12
     acceleration: float = 3.0  # rad/s^2 for every joint (URDFs carry no acceleration limits)
     ik: IKOptions = IKOptions(restarts=2, max_iters=40)

@@ -9,7 +9,8 @@ Stages, each timed and each with its own failure reason:
    (Fig. 6), its orientation from the grasp directions, then Gaussian samples around it
    until both arms reach it collision-free (:func:`keyconf.exchange_configuration`);
 3. ``grasp``, ``carry``, ``place``, ``rest``: the four queries (:mod:`plan.queries`),
-   each a roadmap query (or, with ``planner="rrt-connect"``, the single-query baseline)
+   each a roadmap query (or, with ``planner="rrt-connect"``, the single-query baseline;
+   with ``"ompl-rrtconnect"``, OMPL's RRT-Connect as its peer, :mod:`plan.ompl_peer`)
    framed by the approach, lift and retreat lines of the key configurations; finger
    closing and opening are phases of their own;
 4. timing: stop-at-every-waypoint trapezoids within the URDF velocity limits.
@@ -33,6 +34,7 @@ from regrasp_cli.plan.exchange import exchange_orientation, exchange_position, g
 from regrasp_cli.plan.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, \
     palm_and_finger_links, static_geometry
 from regrasp_cli.plan.keyconf import OTHER, ExchangeConfig, approach_axis, exchange_configuration, shoulder, wrist
+from regrasp_cli.plan.ompl_peer import ompl_query, ompl_version
 from regrasp_cli.plan.queries import PhaseWorlds, QueryFailed, QueryStats, Roadmap, roadmap_query, rrt_query
 from regrasp_cli.plan.timing import time_parameterise
 from regrasp_cli.roadmap.local import joint_reach, joint_weights
@@ -180,7 +182,9 @@ def _query_job(name: str):
     scratch.rng = np.random.default_rng([j["seed"], QUERY_NAMES.index(name)])
     qs, before = QueryStats(), scratch.checks
     try:
-        if roadmap is None:
+        if scratch.options.planner == "ompl-rrtconnect":
+            path = ompl_query(scratch, a, b, worlds, j["weights"], qs)
+        elif roadmap is None:
             path = rrt_query(scratch, a, b, worlds, j["weights"], qs)
         else:
             path = roadmap_query(scratch, roadmap, a, b, worlds, qs)
@@ -228,6 +232,8 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     scratch = Scratch(problem, options, np.random.default_rng([seed, 20]))  # each parallel stage has its own
     task = problem.spec.task
     weights = roadmap.weights if roadmap is not None else joint_weights(robot)
+    if options.planner == "ompl-rrtconnect":
+        ompl_version()  # InputError now, not after the key configurations, when the extra is missing
     t0 = time.perf_counter()
 
     # the ends of the task first: nothing else matters if the robot starts in collision
