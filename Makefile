@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 SCENE := configs/scenes/desk_handover.yaml
 
-.PHONY: demo test setup browser bench-collision bench-grasps bench-roadmap bench-plan clean
+.PHONY: demo test setup browser bench-collision bench-grasps bench-roadmap bench-plan bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -48,6 +48,10 @@ bench-roadmap: setup
 
 bench-plan: setup
 	$(BIN)/python scripts/bench_plan.py --out docs/bench_plan.md
+
+# the default benchmark suite (configs/bench/default.yaml): results in bench-results/default/
+bench: setup
+	$(BIN)/regrasp bench configs/bench/default.yaml
 
 clean:
 	rm -rf $(VENV) cache .pytest_cache

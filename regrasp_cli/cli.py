@@ -142,8 +142,10 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
 @click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("plan.json"),
               show_default=True, help="Where to write the plan JSON.")
 @click.option("--seed", type=int, default=None, help="Random seed (default: the scene's planning.seed).")
-@click.option("--planner", type=click.Choice(["roadmap", "rrt-connect"]), default="roadmap", show_default=True,
-              help="Queries through the cached Super Graph, or single-query RRT-Connect (the paper's baseline).")
+@click.option("--planner", type=click.Choice(["roadmap", "rrt-connect", "ompl-rrtconnect"]), default="roadmap",
+              show_default=True,
+              help="Queries through the cached Super Graph, single-query RRT-Connect (the paper's baseline) or "
+                   "OMPL's RRT-Connect (extra 'ompl').")
 @click.option("--no-build", is_flag=True, help="Refuse missing or stale artefacts instead of building them.")
 @click.option("--jobs", type=int, default=2, show_default=True, help="Worker processes for artefact builds.")
 @click.option("--no-timings", is_flag=True,
@@ -202,6 +204,27 @@ def show(plan_file: Path, html_file: Path | None, png_dir: Path | None, fps: int
     from regrasp_cli.show.command import run_show
 
     run_show(plan_file, html_file, png_dir, fps, size, geometry)
+
+
+@main.command()
+@click.argument("suite_file", metavar="SUITE", type=click.Path(path_type=Path))
+@click.option("-o", "--output", type=click.Path(path_type=Path), default=None, metavar="DIR",
+              help="Results folder (default: bench-results/<suite name>/).")
+@click.option("--jobs", type=int, default=2, show_default=True,
+              help="Runs at once, each in its own process (also the processes of missing artefact builds).")
+@click.option("--seeds", type=int, default=None, help="Override the suite's seeds with 0 .. N-1.")
+@click.option("--planners", default=None, metavar="A,B", help="Override the suite's planners.")
+@click.option("--budget-s", type=float, default=None, help="Override the suite's wall-clock budget per run (s).")
+@click.pass_context
+def bench(ctx: click.Context, suite_file: Path, output: Path | None, jobs: int, seeds: int | None,
+          planners: str | None, budget_s: float | None) -> None:
+    """Run a benchmark suite: every scene x planner x seed, each run in its own process
+    with a time budget; write runs.jsonl, summary.md and times.png and print the tables.
+
+    A failed run (no plan, invalid plan, crash, over budget) is recorded with its reason."""
+    from regrasp_cli.bench.command import run_bench
+
+    run_bench(suite_file, ctx.obj["cache_dir"], output, jobs, seeds, planners, budget_s)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,98 @@
+"""`regrasp bench SUITE.yaml`: run a benchmark suite and write its results folder:
+``runs.jsonl`` (one record per run, rewritten atomically as runs finish), ``summary.md``
+(the tables), ``times.png`` (time per phase per planner) and ``meta.json`` (machine,
+suite, offline stages); the tables are also printed."""
+
+from __future__ import annotations
+
+import datetime
+import json
+import os
+import platform
+from pathlib import Path
+
+from rich.console import Console
+
+from regrasp_cli import __version__
+from regrasp_cli.bench.suite import REFERENCE, Suite, load_suite, with_overrides
+from regrasp_cli.errors import InputError
+from regrasp_cli.store import atomic_write_bytes, atomic_write_text
+
+
+def machine() -> dict:
+    cpu = "?"
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), "?")
+    except OSError:
+        cpu = platform.processor() or "?"
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
+            "platform": platform.platform(), "regrasp": __version__,
+            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
+
+
+def _plain(x):
+    return x.tolist() if hasattr(x, "tolist") else str(x)
+
+
+def jsonl(records: list[dict]) -> str:
+    return "".join(json.dumps(r, default=_plain, sort_keys=False) + "\n" for r in records)
+
+
+def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int, seeds: int | None = None,
+              planners: str | None = None, budget_s: float | None = None,
+              console: Console | None = None) -> list[dict]:
+    """The `bench` command; returns the run records (sorted by scene, planner, seed)."""
+    from regrasp_cli.bench.report import markdown, plot_png, print_tables
+    from regrasp_cli.bench.runner import items_of, offline_stages, run_items
+
+    console = console or Console()
+    err = Console(stderr=True)
+    if jobs < 1:
+        raise InputError(None, "--jobs", f"expected an integer >= 1, found {jobs}")
+    suite: Suite = with_overrides(load_suite(suite_file), seeds, planners, budget_s)
+    out_dir = Path("bench-results") / suite.name if out_dir is None else Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(None, "--output", f"{out_dir} exists and is not a folder")
+    plan_dir = out_dir / "plans"
+    plan_dir.mkdir(parents=True, exist_ok=True)
+
+    offline = offline_stages(suite, cache_dir, jobs, err)
+    items = items_of(suite, cache_dir, plan_dir)
+    meta = {"machine": machine(), "suite": {"file": str(suite.file), "name": suite.name,
+                                            "scenes": [str(s) for s in suite.scenes],
+                                            "planners": list(suite.planners), "seeds": list(suite.seeds),
+                                            "budget_s": suite.budget_s, "roadmap_nodes": suite.roadmap_nodes,
+                                            "grasp_target": suite.grasp_target},
+            "jobs": jobs, "runs": len(items), "offline": offline}
+    atomic_write_text(out_dir / "meta.json", json.dumps(meta, indent=1, default=_plain) + "\n")
+    err.print(f"{len(items)} runs ({len(suite.scenes)} scene(s) x {len(suite.planners)} planner(s) x "
+              f"{len(suite.seeds)} seed(s)), {jobs} job(s), budget {suite.budget_s:g} s per run")
+
+    done: list[dict] = []
+
+    def on_record(rec: dict) -> None:
+        done.append(rec)
+        state = "solved" if rec["solved"] else f"FAILED at {rec['stage']}: {rec['reason']}"
+        t = "–" if rec["total_s"] is None else f"{rec['total_s']:.2f} s"
+        err.print(f"[{len(done)}/{len(items)}] {rec['scene']} {rec['planner']} seed {rec['seed']}: {t}, {state}",
+                  markup=False, highlight=False)
+        atomic_write_text(out_dir / "runs.jsonl", jsonl(done))
+
+    run_items(items, jobs, on_record)
+    rank = {p: i for i, p in enumerate(suite.planners)}
+    records = sorted(done, key=lambda r: (r["scene"], rank[r["planner"]], r["seed"]))
+    atomic_write_text(out_dir / "runs.jsonl", jsonl(records))
+
+    m = meta["machine"]
+    header = [f"# Benchmark `{suite.name}`", "",
+              f"{m['date']}; {m['cpu']}, {m['cores']} cores, Python {m['python']}, regrasp {m['regrasp']}; "
+              f"{len(items)} runs, jobs={jobs}, budget {suite.budget_s:g} s per run; seeds "
+              f"{', '.join(map(str, suite.seeds)) if len(suite.seeds) <= 8 else f'{len(suite.seeds)} ({suite.seeds[0]}..)'}.",
+              "", "Each run in its own process (joblib/loky workers, the run forked with its budget), planner "
+              "jobs=1; a run is solved when the plan passes `regrasp validate`."]
+    atomic_write_text(out_dir / "summary.md", markdown(records, header, offline, REFERENCE))
+    atomic_write_bytes(out_dir / "times.png", plot_png(records, f"{suite.name}: {len(suite.seeds)} seeds"))
+    print_tables(records, console, REFERENCE)
+    console.print(f"results: {out_dir}/ (runs.jsonl, summary.md, times.png, meta.json, plans/)")
+    return records

@@ -1,0 +1,308 @@
+"""The runs of a benchmark suite: the offline stages timed once per scene, then every
+(scene, planner, seed) run in a joblib (loky) worker, each inside a forked child process
+with a wall-clock budget.
+
+A run is what `regrasp plan` does online: the planner (double grasps, exchange pose, key
+configurations, the four queries with their lazy validation, timing; Saut et al. 2010
+§IV-B, §V-B, §V-C), writing the plan JSON, then the independent validator
+(`regrasp validate`).  It is solved when the planner returned a plan and the validator
+found no issue.  A run that raises, dies or outlives its budget is a failure with its
+stage (``crash``, ``budget``, or the planner's stage) and reason; it never stops the suite.
+
+One record per run (a JSON object, one line of ``runs.jsonl``)::
+
+    scene, planner, seed, solved, stage, reason     stage/reason None when solved
+    total_s                                         planner + write + validate (s), or time to failure
+    planner_s, write_s, validation_s                the three parts (s)
+    stages_s: {double grasps, exchange, queries, timing}
+    queries: {grasp|carry|place|rest: {n, invalid_edges, rrt_calls, planning_s, validation_s}}
+    validation: {valid, issues, first_issues, configurations_checked} or None
+    path_length                                     sum of weighted joint-space segment lengths
+    regrasps                                        changes of the holding hand (1: a hand-over)
+    motion_s, waypoints, plan                       plan duration, waypoint count, plan file
+    peak_rss_mb                                     peak resident memory of the run's process (MB)
+    traceback                                       only for a run that raised (stage ``crash``)
+
+The path length uses the same metric for every planner (:func:`joint_weights` of the
+robot at rest), so that lengths compare across planners.
+"""
+
+from __future__ import annotations
+
+import functools
+import multiprocessing
+import os
+import resource
+import sys
+import time
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from regrasp_cli.bench.aggregate import QUERIES, STAGES
+from regrasp_cli.bench.suite import REFERENCE, Suite
+
+
+@dataclass(frozen=True)
+class RunItem:
+    """One run to do; plain values only (it crosses process boundaries)."""
+
+    scene: str  # the scene's label in the records
+    scene_file: str
+    planner: str
+    seed: int
+    cache_dir: str
+    plan_file: str
+    budget_s: float
+    roadmap_nodes: int
+    grasp_target: int | None
+
+
+def scene_labels(suite: Suite) -> dict[Path, str]:
+    """A short unique label per scene: the file stem, or the path relative to the suite
+    file when two stems clash."""
+    stems = [p.stem for p in suite.scenes]
+    if len(set(stems)) == len(stems):
+        return dict(zip(suite.scenes, stems))
+    return {p: os.path.relpath(p, suite.file.parent) for p in suite.scenes}
+
+
+def items_of(suite: Suite, cache_dir: Path, plan_dir: Path) -> list[RunItem]:
+    """Every run, seed-major; for each seed the planners' order rotates with the seed, so
+    warm-up and machine noise fall on them alike."""
+    labels = scene_labels(suite)
+    items = []
+    for scene in suite.scenes:
+        for i, seed in enumerate(suite.seeds):
+            k = i % len(suite.planners)
+            for planner in suite.planners[k:] + suite.planners[:k]:
+                name = f"{labels[scene]}-{planner}-{seed}".replace("/", "_").replace(os.sep, "_")
+                items.append(RunItem(labels[scene], str(scene), planner, seed, str(Path(cache_dir).resolve()),
+                                     str((plan_dir / f"{name}.json").resolve()), suite.budget_s,
+                                     suite.roadmap_nodes, suite.grasp_target))
+    return items
+
+
+# ------------------------------------------------------------------ offline stages
+
+
+def _snapshot(folder: Path) -> dict[str, int]:
+    return {str(p): p.stat().st_mtime_ns for p in folder.glob("*.h5")} if folder.is_dir() else {}
+
+
+def offline_stages(suite: Suite, cache_dir: Path, jobs: int, console) -> dict[str, dict]:
+    """Per scene label: seconds and status (``built`` or ``cached``) of loading the
+    problem, the grasp lists of both hands and the roadmap (when a planner needs it),
+    building whichever is missing or stale, and of making the Super Graph ready."""
+    from regrasp_cli.plan.command import load_artefacts
+    from regrasp_cli.plan.queries import Roadmap
+    from regrasp_cli.scene import load_problem
+
+    need_roadmap = REFERENCE in suite.planners
+    out = {}
+    for scene, label in scene_labels(suite).items():
+        row = {}
+        t0 = time.perf_counter()
+        problem = load_problem(scene, cache_dir)
+        row["problem"] = {"s": time.perf_counter() - t0, "status": "loaded"}
+        for what, folder, roadmap in (("grasp lists", "grasps", False), ("roadmap", "roadmap", True)):
+            if roadmap and not need_roadmap:
+                continue
+            before = _snapshot(Path(cache_dir) / folder)
+            t0 = time.perf_counter()
+            lists, art, _ = load_artefacts(scene, cache_dir, problem, True, jobs, roadmap, console,
+                                           suite.roadmap_nodes, suite.grasp_target)
+            seconds = time.perf_counter() - t0
+            built = _snapshot(Path(cache_dir) / folder) != before
+            row[what] = {"s": seconds, "status": "built" if built else "cached"}
+            if not roadmap:
+                row[what]["size"] = {h: len(g.X_OG) for h, g in lists.items()}
+            else:
+                t0 = time.perf_counter()
+                rm = Roadmap.of(art)
+                row["super graph ready"] = {"s": time.perf_counter() - t0, "status": "loaded",
+                                            "size": {"nodes": len(rm.nodes), "edges": len(rm.edges)}}
+        out[label] = row
+    return out
+
+
+# ------------------------------------------------------------------ one run
+
+
+@functools.lru_cache(maxsize=4)
+def _context(scene_file: str, cache_dir: str, with_roadmap: bool, roadmap_nodes: int, grasp_target: int | None):
+    """Problem, grasp lists, Roadmap (or None), artefact hashes and path-length weights of
+    a scene, loaded once per worker process (the parent built the artefacts)."""
+    from rich.console import Console
+
+    from regrasp_cli.plan.command import load_artefacts
+    from regrasp_cli.plan.queries import Roadmap
+    from regrasp_cli.roadmap.local import joint_weights
+    from regrasp_cli.scene import load_problem
+
+    problem = load_problem(scene_file, Path(cache_dir))
+    lists, art, hashes = load_artefacts(Path(scene_file), Path(cache_dir), problem, False, 1, with_roadmap,
+                                        Console(stderr=True), roadmap_nodes, grasp_target)
+    # one metric for every planner, so that path lengths compare
+    return problem, lists, Roadmap.of(art) if art is not None else None, hashes, joint_weights(problem.robot)
+
+
+def path_length(phases, weights: np.ndarray) -> float:
+    """Sum of the weighted joint-space lengths of the straight segments between
+    consecutive waypoints of every phase (``phases``: objects with ``waypoints`` (k, nq))."""
+    from regrasp_cli.roadmap.local import distance
+
+    total = 0.0
+    for p in phases:
+        w = np.asarray(p.waypoints, dtype=float)
+        if len(w) > 1:
+            total += float(np.sum(distance(w[:-1], w[1:], weights)))
+    return total
+
+
+def regrasps(phases) -> int:
+    """How many times the object passes from one hand to the other (1 for a hand-over)."""
+    holders = [p.holding[0] for p in phases if len(p.holding) == 1]
+    return sum(a != b for a, b in zip(holders, holders[1:]))
+
+
+def _base(item: RunItem) -> dict:
+    return {"scene": item.scene, "planner": item.planner, "seed": item.seed, "solved": False,
+            "stage": None, "reason": None, "total_s": None, "planner_s": None, "write_s": None,
+            "validation_s": None, "stages_s": {}, "queries": {}, "validation": None, "path_length": None,
+            "regrasps": None, "motion_s": None, "waypoints": None, "plan": None, "peak_rss_mb": None}
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process (MB)."""
+    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return kb / (1024.0 * 1024.0) if sys.platform == "darwin" else kb / 1024.0  # bytes on macOS
+
+
+def execute(item: RunItem) -> dict:
+    """The run itself, in this process; raises whatever the planner raises."""
+    from regrasp_cli.plan.command import make_plan
+    from regrasp_cli.plan.context import OnlineOptions
+    from regrasp_cli.plan.planner import run
+    from regrasp_cli.trajectory import write_plan
+    from regrasp_cli.validate import validate_plan
+
+    problem, lists, roadmap, hashes, weights = _context(item.scene_file, item.cache_dir, item.planner == REFERENCE,
+                                                        item.roadmap_nodes, item.grasp_target)
+    rec = _base(item)
+    options = OnlineOptions(planner=item.planner, jobs=1)
+    out_file = Path(item.plan_file)
+    t0 = time.perf_counter()
+    outcome = run(problem, lists, roadmap if item.planner == REFERENCE else None, options, item.seed)
+    t1 = time.perf_counter()
+    plan = make_plan(problem, lists, outcome, options, item.seed, out_file, Path(item.cache_dir), hashes,
+                     timings=True)
+    write_plan(out_file, plan)
+    t2 = time.perf_counter()
+    report = validate_plan(out_file, jobs=1) if outcome.failure is None else None
+    t3 = time.perf_counter()
+    tm, qs = outcome.timing, outcome.stats.get("queries", {})
+    rec.update({
+        "total_s": t3 - t0, "planner_s": t1 - t0, "write_s": t2 - t1, "validation_s": t3 - t2,
+        "stages_s": {k: float(tm.get(k, 0.0)) for k in STAGES},
+        "queries": {q: {"n": int(qs[q].get("nodes", 0)), "invalid_edges": int(qs[q].get("invalid_edges", 0)),
+                        "rrt_calls": int(qs[q].get("rrt_calls", 0)),
+                        "planning_s": float(tm.get(f"{q} planning", 0.0)),
+                        "validation_s": float(tm.get(f"{q} validation", 0.0))} for q in QUERIES if q in qs},
+        "plan": out_file.name,
+    })
+    if outcome.failure is not None:
+        rec["stage"], rec["reason"] = outcome.failure.stage, outcome.failure.reason
+        return rec
+    rec.update({"path_length": path_length(outcome.phases, weights), "regrasps": regrasps(outcome.phases),
+                "motion_s": float(plan.duration), "waypoints": int(sum(len(p.waypoints) for p in plan.phases)),
+                "validation": {"valid": report.valid, "issues": len(report.issues),
+                               "first_issues": [str(i) for i in report.issues[:3]],
+                               "configurations_checked": int(report.configurations_checked)}})
+    if report.valid:
+        rec["solved"] = True
+    else:
+        rec["stage"] = "validation"
+        rec["reason"] = f"the written plan fails {len(report.issues)} check(s); first: {report.issues[0]}"
+    return rec
+
+
+def _crash(item: RunItem, exc: BaseException, seconds: float) -> dict:
+    rec = _base(item)
+    message = " ".join(str(exc).split()) or "(no message)"
+    rec.update({"stage": "crash", "reason": f"{type(exc).__name__}: {message}", "total_s": seconds,
+                "traceback": traceback.format_exc(limit=8)})
+    return rec
+
+
+def _child(conn, item: RunItem, work: Callable[[RunItem], dict]) -> None:
+    t0 = time.perf_counter()
+    try:
+        rec = work(item)
+    except BaseException as exc:  # noqa: BLE001 - every failure becomes a record
+        rec = _crash(item, exc, time.perf_counter() - t0)
+    rec["peak_rss_mb"] = peak_rss_mb()
+    try:
+        conn.send(rec)
+    finally:
+        conn.close()
+        os._exit(0)  # no atexit handlers of the parent (pytest, joblib) in the fork
+
+
+def run_one(item: RunItem, work: Callable[[RunItem], dict] = execute) -> dict:
+    """``work(item)`` in a forked child process, killed after ``item.budget_s`` seconds;
+    always returns a record.  The scene and artefacts are loaded here first (cached per
+    process, not counted in the budget), so the child inherits them."""
+    t0 = time.perf_counter()
+    try:
+        if work is execute:
+            _context(item.scene_file, item.cache_dir, item.planner == REFERENCE, item.roadmap_nodes,
+                     item.grasp_target)
+    except BaseException as exc:  # noqa: BLE001
+        return _crash(item, exc, time.perf_counter() - t0)
+    ctx = multiprocessing.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    child = ctx.Process(target=_child, args=(send, item, work), daemon=True)
+    t0 = time.perf_counter()
+    child.start()
+    send.close()  # the child's end: EOF here when the child dies
+    try:
+        if recv.poll(item.budget_s):
+            try:
+                return recv.recv()
+            except EOFError:
+                child.join()
+                rec = _base(item)
+                code = child.exitcode
+                how = f"killed by signal {-code}" if code is not None and code < 0 else f"exit code {code}"
+                rec.update({"stage": "crash", "reason": f"the run's process died ({how})",
+                            "total_s": time.perf_counter() - t0})
+                return rec
+        rec = _base(item)
+        rec.update({"stage": "budget", "reason": f"exceeded the budget of {item.budget_s:g} s (killed)",
+                    "total_s": time.perf_counter() - t0})
+        return rec
+    finally:
+        if child.is_alive():
+            child.kill()
+        child.join()
+        recv.close()
+
+
+def run_items(items: list[RunItem], jobs: int, on_record: Callable[[dict], None]) -> list[dict]:
+    """Every item in ``jobs`` loky processes (this process when jobs == 1), calling
+    ``on_record`` in this process as each record arrives (in item order)."""
+    from joblib import Parallel, delayed
+
+    records = []
+    try:
+        for rec in Parallel(n_jobs=jobs, backend="loky", return_as="generator")(delayed(run_one)(it)
+                                                                                 for it in items):
+            records.append(rec)
+            on_record(rec)
+    finally:
+        _context.cache_clear()
+    return records

@@ -1,0 +1,111 @@
+"""The benchmark suite file (``format: regrasp.bench/1``) -> a frozen :class:`Suite`.
+
+Fields: ``name``; ``scenes`` (scene.yaml paths relative to the suite file); ``planners``
+(names of :data:`PLANNERS`); ``seeds`` (a count N, meaning 0 .. N-1, or a list of
+integers; default 20); ``budget_s`` (wall-clock seconds per run, default 60); optional
+``roadmap_nodes`` (default 50) and ``grasp_target`` (default: the grasp builder's).
+Every error is an :class:`~regrasp_cli.errors.InputError` naming the file and field.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from regrasp_cli.config import Fields, read_yaml, resolve_path
+from regrasp_cli.errors import InputError
+
+SUITE_FORMAT = "regrasp.bench/1"
+# planners a suite may name; the roadmap is the reference of the per-seed ratios, and the
+# only one that loads the offline roadmap
+PLANNERS = ("roadmap", "rrt-connect", "ompl-rrtconnect")
+REFERENCE = "roadmap"
+DEFAULT_SEEDS = 20
+DEFAULT_BUDGET_S = 60.0
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+
+
+@dataclass(frozen=True)
+class Suite:
+    file: Path
+    name: str
+    scenes: tuple[Path, ...]
+    planners: tuple[str, ...]
+    seeds: tuple[int, ...]
+    budget_s: float = DEFAULT_BUDGET_S
+    roadmap_nodes: int = 50
+    grasp_target: int | None = None
+
+
+def _planners(file: Path | None, field: str, names: list) -> tuple[str, ...]:
+    if not names:
+        raise InputError(file, field, f"expected at least one planner of: {', '.join(PLANNERS)}")
+    for name in names:
+        if name not in PLANNERS:
+            raise InputError(file, field, f"unknown planner {name!r}; expected one of: {', '.join(PLANNERS)}")
+    if len(set(names)) != len(names):
+        raise InputError(file, field, "a planner is listed twice")
+    return tuple(names)
+
+
+def load_suite(path: str | Path) -> Suite:
+    """Read and check a suite file."""
+    file, data = read_yaml(path)
+    f = Fields(file, data)
+    f.only("format", "name", "scenes", "planners", "seeds", "budget_s", "roadmap_nodes", "grasp_target")
+    fmt = f.str("format")
+    if fmt != SUITE_FORMAT:
+        raise f.error("format", f"expected {SUITE_FORMAT!r}, found {fmt!r}")
+    name = f.str("name")
+    if not _NAME.match(name):
+        raise f.error("name", f"expected letters, digits, '.', '_' or '-' (it names the results folder), "
+                              f"found {name!r}")
+    scenes = f.raw("scenes")
+    if not isinstance(scenes, list) or not scenes or not all(isinstance(s, str) and s for s in scenes):
+        raise f.error("scenes", "expected a non-empty list of scene.yaml paths (relative to the suite file)")
+    scene_paths = tuple(resolve_path(file, f"scenes[{i}]", s) for i, s in enumerate(scenes))
+    if len(set(scene_paths)) != len(scene_paths):
+        raise f.error("scenes", "a scene is listed twice")
+    planners = f.raw("planners")
+    if not isinstance(planners, list) or not all(isinstance(p, str) for p in planners):
+        raise f.error("planners", f"expected a list of planner names ({', '.join(PLANNERS)})")
+    seeds = seeds_of(file, "seeds", f.data.get("seeds", DEFAULT_SEEDS))
+    budget = f.float("budget_s", DEFAULT_BUDGET_S, positive=True)
+    nodes = f.int("roadmap_nodes", 50, minimum=1)
+    target = f.data.get("grasp_target")
+    if target is not None:
+        target = f.int("grasp_target", minimum=0)
+    return Suite(file, name, scene_paths, _planners(file, "planners", planners), seeds, float(budget), nodes, target)
+
+
+def seeds_of(file: Path | None, field: str, value) -> tuple[int, ...]:
+    """A count N (seeds 0 .. N-1) or a list of distinct integers >= 0."""
+    if isinstance(value, bool):
+        raise InputError(file, field, "expected a count or a list of integer seeds, found bool")
+    if isinstance(value, int):
+        if value < 1:
+            raise InputError(file, field, f"expected a count >= 1, found {value}")
+        return tuple(range(value))
+    if isinstance(value, list) and value and all(isinstance(s, int) and not isinstance(s, bool) and s >= 0
+                                                  for s in value):
+        if len(set(value)) != len(value):
+            raise InputError(file, field, "a seed is listed twice")
+        return tuple(value)
+    raise InputError(file, field, f"expected a count >= 1 or a non-empty list of integers >= 0, found {value!r}")
+
+
+def with_overrides(suite: Suite, seeds: int | None = None, planners: str | None = None,
+                   budget_s: float | None = None) -> Suite:
+    """The suite with the command line's ``--seeds N``, ``--planners a,b`` and ``--budget-s``."""
+    if seeds is not None:
+        suite = replace(suite, seeds=seeds_of(None, "--seeds", seeds))
+    if planners is not None:
+        names = [p.strip() for p in planners.split(",") if p.strip()]
+        suite = replace(suite, planners=_planners(None, "--planners", names))
+    if budget_s is not None:
+        if not (budget_s > 0 and math.isfinite(budget_s)):
+            raise InputError(None, "--budget-s", f"expected a number of seconds > 0, found {budget_s}")
+        suite = replace(suite, budget_s=float(budget_s))
+    return suite

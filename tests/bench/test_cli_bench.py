@@ -1,0 +1,87 @@
+"""`regrasp bench` end to end on the default scene with the small artefacts the plan
+tests use (grasp lists of 20, roadmaps of 12 nodes), built once into a cache of this
+module (not the session cache: tests/bench runs before tests/grasp, whose determinism test
+expects the session cache to hold the right hand's finger workspace only):
+a 2-seed suite writes one record per run, each validated, with the summary, Table I and
+the plot; a run over its budget is recorded with its reason and the suite goes on; bad
+input is one error line with exit 2."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from cli_helpers import SCENE_YAML, assert_one_error_line, needs_separate_stderr, run
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def suite(tmp_path: Path, **fields) -> Path:
+    d = {"format": "regrasp.bench/1", "name": "tiny", "scenes": [str(SCENE_YAML)], "planners": ["roadmap"],
+         "seeds": 2, "budget_s": 120, "roadmap_nodes": 12, "grasp_target": 20}
+    d.update(fields)
+    p = tmp_path / "suite.yaml"
+    p.write_text(yaml.safe_dump(d))
+    return p
+
+
+@pytest.fixture(scope="module")
+def cache_dir(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("bench-cache")
+
+
+def records(out: Path) -> list[dict]:
+    return [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
+
+
+def test_tiny_suite_end_to_end(cache_dir, tmp_path):
+    out = tmp_path / "results"
+    r = run("--cache-dir", cache_dir, "bench", suite(tmp_path), "-o", out, "--jobs", "2")
+    assert r.exit_code == 0, (r.output, r.exception)
+    recs = records(out)
+    assert [(x["planner"], x["seed"]) for x in recs] == [("roadmap", 0), ("roadmap", 1)]
+    for x in recs:
+        assert x["solved"], x
+        assert x["validation"]["valid"] and x["validation"]["issues"] == 0
+        assert x["regrasps"] == 1 and x["path_length"] > 0 and x["peak_rss_mb"] > 0
+        assert x["total_s"] >= x["planner_s"] + x["validation_s"] > 0
+        assert set(x["queries"]) == {"grasp", "carry", "place", "rest"}
+        assert (out / "plans" / x["plan"]).is_file()
+    text = (out / "summary.md").read_text()
+    assert "| desk_handover | roadmap | 2/2 | 100 % |" in text
+    assert "### desk_handover, roadmap" in text and "| total |" in text
+    assert "| desk_handover | grasp lists |" in text and "| right 2" in text
+    assert (out / "times.png").read_bytes().startswith(PNG)
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["runs"] == 2 and meta["offline"]["desk_handover"]["grasp lists"]["status"] in ("built", "cached")
+    assert "Table I: desk_handover, roadmap" in r.stdout
+
+
+def test_a_run_over_budget_is_a_recorded_failure(cache_dir, tmp_path):
+    out = tmp_path / "results"
+    r = run("--cache-dir", cache_dir, "bench", suite(tmp_path, planners=["roadmap", "rrt-connect"]), "-o", out,
+            "--jobs", "1", "--seeds", "1", "--budget-s", "0.01")
+    assert r.exit_code == 0, (r.output, r.exception)
+    recs = records(out)
+    assert len(recs) == 2  # the first failure did not stop the suite
+    for x in recs:
+        assert (x["solved"], x["stage"]) == (False, "budget")
+        assert x["reason"] == "exceeded the budget of 0.01 s (killed)"
+    text = (out / "summary.md").read_text()
+    assert "## Failures (2)" in text and "| 0/1 | 0 % |" in text
+
+
+@needs_separate_stderr
+def test_bad_suite_is_one_error_line(tmp_path):
+    r = run("bench", suite(tmp_path, planners=["roadmap", "prm"]), "-o", tmp_path / "o")
+    assert_one_error_line(r, "suite.yaml", "planners", "unknown planner 'prm'")
+    r = run("bench", suite(tmp_path), "--planners", "roadmap,prm", "-o", tmp_path / "o")
+    assert_one_error_line(r, "--planners")
+
+
+def test_help():
+    r = run("bench", "--help")
+    assert r.exit_code == 0 and "--budget-s" in r.output and "--jobs" in r.output

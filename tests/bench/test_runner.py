@@ -1,0 +1,80 @@
+"""A run in its own process never stops the suite: one that raises, dies or outlives its
+budget comes back as a failure record with its stage and reason (regrasp_cli.bench.runner
+run_one with stand-in work functions: no planning, so fast); and the path measures of a
+record on tiny hand-made phases."""
+
+from __future__ import annotations
+
+import os
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from regrasp_cli.bench.runner import RunItem, path_length, regrasps, run_one
+
+
+def item(budget_s: float = 5.0) -> RunItem:
+    return RunItem("desk", "/nonexistent/scene.yaml", "rrt-connect", 3, "/tmp", "/tmp/plan.json", budget_s, 12, 20)
+
+
+def _solves(it: RunItem) -> dict:
+    return {"scene": it.scene, "planner": it.planner, "seed": it.seed, "solved": True, "stage": None,
+            "reason": None, "total_s": 0.0}
+
+
+def _sleeps(it: RunItem) -> dict:
+    time.sleep(30)
+    return _solves(it)
+
+
+def _raises(it: RunItem) -> dict:
+    raise ModuleNotFoundError("No module named 'ompl'")
+
+
+def _dies(it: RunItem) -> dict:
+    os._exit(3)
+
+
+def test_a_run_comes_back_with_its_peak_memory():
+    rec = run_one(item(), _solves)
+    assert rec["solved"] and rec["seed"] == 3
+    assert rec["peak_rss_mb"] > 1.0
+
+
+def test_a_run_over_budget_is_killed_and_recorded():
+    t0 = time.perf_counter()
+    rec = run_one(item(budget_s=0.3), _sleeps)
+    assert time.perf_counter() - t0 < 10.0  # not the 30 s of the work
+    assert not rec["solved"] and rec["stage"] == "budget"
+    assert "0.3 s" in rec["reason"] and (rec["scene"], rec["planner"], rec["seed"]) == ("desk", "rrt-connect", 3)
+
+
+def test_an_exception_is_recorded_with_its_type_and_message():
+    rec = run_one(item(), _raises)
+    assert not rec["solved"] and rec["stage"] == "crash"
+    assert rec["reason"] == "ModuleNotFoundError: No module named 'ompl'"
+    assert "Traceback" in rec["traceback"]
+
+
+def test_a_dead_process_is_recorded():
+    rec = run_one(item(), _dies)
+    assert (rec["solved"], rec["stage"]) == (False, "crash")
+    assert "exit code 3" in rec["reason"]
+
+
+def test_a_scene_that_does_not_load_is_a_crash_not_an_exception():
+    rec = run_one(item())  # the real work: the scene file is missing
+    assert rec["stage"] == "crash" and "no such file" in rec["reason"]
+
+
+def test_path_length_and_regrasps_on_a_hand_over():
+    w = np.array([1.0, 0.25])
+    phases = [SimpleNamespace(holding=(), waypoints=np.array([[0.0, 0.0], [3.0, 0.0]])),
+              SimpleNamespace(holding=("right",), waypoints=np.array([[3.0, 0.0], [3.0, 8.0], [3.0, 8.0]])),
+              SimpleNamespace(holding=("left",), waypoints=np.array([[3.0, 8.0]])),
+              SimpleNamespace(holding=(), waypoints=np.zeros((0, 2)))]
+    assert path_length(phases, w) == pytest.approx(3.0 + 4.0)  # sqrt(0.25 * 64) = 4
+    assert regrasps(phases) == 1
+    assert regrasps(phases[:2]) == 0
