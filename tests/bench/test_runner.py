@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -15,8 +16,9 @@ import pytest
 from regrasp_cli.bench.runner import RunItem, path_length, regrasps, run_one
 
 
-def item(budget_s: float = 5.0) -> RunItem:
-    return RunItem("desk", "/nonexistent/scene.yaml", "rrt-connect", 3, "/tmp", "/tmp/plan.json", budget_s, 12, 20)
+def item(tmp: Path, budget_s: float = 5.0) -> RunItem:
+    return RunItem("desk", str(tmp / "missing" / "scene.yaml"), "rrt-connect", 3, str(tmp), str(tmp / "plan.json"),
+                   budget_s, 12, 20)
 
 
 def _solves(it: RunItem) -> dict:
@@ -37,35 +39,35 @@ def _dies(it: RunItem) -> dict:
     os._exit(3)
 
 
-def test_a_run_comes_back_with_its_peak_memory():
-    rec = run_one(item(), _solves)
+def test_a_run_comes_back_with_its_peak_memory(tmp_path):
+    rec = run_one(item(tmp_path), _solves)
     assert rec["solved"] and rec["seed"] == 3
     assert rec["peak_rss_mb"] > 1.0
 
 
-def test_a_run_over_budget_is_killed_and_recorded():
+def test_a_run_over_budget_is_killed_and_recorded(tmp_path):
     t0 = time.perf_counter()
-    rec = run_one(item(budget_s=0.3), _sleeps)
+    rec = run_one(item(tmp_path, budget_s=0.3), _sleeps)
     assert time.perf_counter() - t0 < 10.0  # not the 30 s of the work
     assert not rec["solved"] and rec["stage"] == "budget"
     assert "0.3 s" in rec["reason"] and (rec["scene"], rec["planner"], rec["seed"]) == ("desk", "rrt-connect", 3)
 
 
-def test_an_exception_is_recorded_with_its_type_and_message():
-    rec = run_one(item(), _raises)
+def test_an_exception_is_recorded_with_its_type_and_message(tmp_path):
+    rec = run_one(item(tmp_path), _raises)
     assert not rec["solved"] and rec["stage"] == "crash"
     assert rec["reason"] == "ModuleNotFoundError: No module named 'ompl'"
     assert "Traceback" in rec["traceback"]
 
 
-def test_a_dead_process_is_recorded():
-    rec = run_one(item(), _dies)
+def test_a_dead_process_is_recorded(tmp_path):
+    rec = run_one(item(tmp_path), _dies)
     assert (rec["solved"], rec["stage"]) == (False, "crash")
     assert "exit code 3" in rec["reason"]
 
 
-def test_a_scene_that_does_not_load_is_a_crash_not_an_exception():
-    rec = run_one(item())  # the real work: the scene file is missing
+def test_a_scene_that_does_not_load_is_a_crash_not_an_exception(tmp_path):
+    rec = run_one(item(tmp_path))  # the real work: the scene file is missing
     assert rec["stage"] == "crash" and "no such file" in rec["reason"]
 
 
