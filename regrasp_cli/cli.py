@@ -215,16 +215,23 @@ def show(plan_file: Path, html_file: Path | None, png_dir: Path | None, fps: int
 @click.option("--seeds", type=int, default=None, help="Override the suite's seeds with 0 .. N-1.")
 @click.option("--planners", default=None, metavar="A,B", help="Override the suite's planners.")
 @click.option("--budget-s", type=float, default=None, help="Override the suite's wall-clock budget per run (s).")
+@click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky", show_default=True,
+              help="Where the runs go: local loky processes (--jobs at once), or the workers of an existing Dask "
+                   "cluster (all its threads; needs --scheduler and pip install 'regrasp[dask]').")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="The Dask scheduler's address (e.g. tcp://host:8786), for --backend dask; the workers must "
+                   "see the cache and results folders at the same paths (a shared file system).")
 @click.pass_context
 def bench(ctx: click.Context, suite_file: Path, output: Path | None, jobs: int, seeds: int | None,
-          planners: str | None, budget_s: float | None) -> None:
+          planners: str | None, budget_s: float | None, backend: str, scheduler: str | None) -> None:
     """Run a benchmark suite: every scene x planner x seed, each run in its own process
     with a time budget; write runs.jsonl, summary.md and times.png and print the tables.
 
     A failed run (no plan, invalid plan, crash, over budget) is recorded with its reason."""
     from regrasp_cli.bench.command import run_bench
 
-    run_bench(suite_file, ctx.obj["cache_dir"], output, jobs, seeds, planners, budget_s)
+    run_bench(suite_file, ctx.obj["cache_dir"], output, jobs, seeds, planners, budget_s,
+              backend=backend, scheduler=scheduler)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -39,17 +39,58 @@ def jsonl(records: list[dict]) -> str:
     return "".join(json.dumps(r, default=_plain, sort_keys=False) + "\n" for r in records)
 
 
+def dask_client(scheduler: str | None):
+    """A ``distributed.Client`` connected to the Dask scheduler at ``scheduler``, which has
+    at least one worker (the caller closes it)."""
+    if scheduler is None:
+        raise InputError(None, "--scheduler", "--backend dask runs on an existing Dask cluster: give its "
+                                              "scheduler's address, e.g. --scheduler tcp://host:8786")
+    try:
+        from distributed import Client
+    except ImportError:
+        raise InputError(None, "--backend", "dask needs the optional extra: pip install 'regrasp[dask]'") from None
+    try:
+        client = Client(scheduler, timeout=10, set_as_default=False)
+    except (OSError, ValueError) as exc:  # refused, timed out (TimeoutError is an OSError), bad address
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        raise InputError(None, "--scheduler", f"cannot connect to the Dask scheduler at {scheduler}: {message}") \
+            from None
+    try:
+        client.wait_for_workers(1, timeout=10)
+    except TimeoutError:
+        client.close()
+        raise InputError(None, "--scheduler", f"the Dask scheduler at {scheduler} has no worker (waited 10 s)") \
+            from None
+    return client
+
+
 def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int, seeds: int | None = None,
               planners: str | None = None, budget_s: float | None = None,
-              console: Console | None = None) -> list[dict]:
-    """The `bench` command; returns the run records (sorted by scene, planner, seed)."""
+              console: Console | None = None, backend: str = "loky", scheduler: str | None = None) -> list[dict]:
+    """The `bench` command; returns the run records (sorted by scene, planner, seed).
+    ``backend`` is ``loky`` (local processes) or ``dask`` (the cluster at ``scheduler``)."""
+    console = console or Console()
+    if jobs < 1:
+        raise InputError(None, "--jobs", f"expected an integer >= 1, found {jobs}")
+    if backend not in ("loky", "dask"):
+        raise InputError(None, "--backend", f"expected loky or dask, found {backend!r}")
+    if backend == "loky" and scheduler is not None:
+        raise InputError(None, "--scheduler", "only for --backend dask")
+    client = dask_client(scheduler) if backend == "dask" else None
+    try:
+        return _run_bench(suite_file, cache_dir, out_dir, jobs, seeds, planners, budget_s, console, client)
+    finally:
+        if client is not None:
+            client.close()
+
+
+def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int, seeds: int | None,
+               planners: str | None, budget_s: float | None, console: Console, client) -> list[dict]:
     from regrasp_cli.bench.report import markdown, plot_png, print_tables
     from regrasp_cli.bench.runner import items_of, offline_stages, run_items
 
-    console = console or Console()
     err = Console(stderr=True)
-    if jobs < 1:
-        raise InputError(None, "--jobs", f"expected an integer >= 1, found {jobs}")
+    where = "loky" if client is None else f"dask at {client.scheduler.address}"
     suite: Suite = with_overrides(load_suite(suite_file), seeds, planners, budget_s)
     out_dir = Path("bench-results") / suite.name if out_dir is None else Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
@@ -64,10 +105,11 @@ def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int
                                             "planners": list(suite.planners), "seeds": list(suite.seeds),
                                             "budget_s": suite.budget_s, "roadmap_nodes": suite.roadmap_nodes,
                                             "grasp_target": suite.grasp_target},
-            "jobs": jobs, "runs": len(items), "offline": offline}
+            "jobs": jobs, "backend": where, "runs": len(items), "offline": offline}
     atomic_write_text(out_dir / "meta.json", json.dumps(meta, indent=1, default=_plain) + "\n")
     err.print(f"{len(items)} runs ({len(suite.scenes)} scene(s) x {len(suite.planners)} planner(s) x "
-              f"{len(suite.seeds)} seed(s)), {jobs} job(s), budget {suite.budget_s:g} s per run")
+              f"{len(suite.seeds)} seed(s)), {f'{jobs} job(s)' if client is None else where}, "
+              f"budget {suite.budget_s:g} s per run")
 
     done: list[dict] = []
 
@@ -79,7 +121,7 @@ def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int
                   markup=False, highlight=False)
         atomic_write_text(out_dir / "runs.jsonl", jsonl(done))
 
-    run_items(items, jobs, on_record)
+    run_items(items, jobs, on_record, client)
     rank = {p: i for i, p in enumerate(suite.planners)}
     records = sorted(done, key=lambda r: (r["scene"], rank[r["planner"]], r["seed"]))
     atomic_write_text(out_dir / "runs.jsonl", jsonl(records))
@@ -89,7 +131,7 @@ def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int
               f"{m['date']}; {m['cpu']}, {m['cores']} cores, Python {m['python']}, regrasp {m['regrasp']}; "
               f"{len(items)} runs, jobs={jobs}, budget {suite.budget_s:g} s per run; seeds "
               f"{', '.join(map(str, suite.seeds)) if len(suite.seeds) <= 8 else f'{len(suite.seeds)} ({suite.seeds[0]}..)'}.",
-              "", "Each run in its own process (joblib/loky workers, the run forked with its budget), planner "
+              "", f"Each run in its own process (joblib workers: {where}; the run forked with its budget), planner "
               "jobs=1; a run is solved when the plan passes `regrasp validate`."]
     atomic_write_text(out_dir / "summary.md", markdown(records, header, offline, REFERENCE))
     atomic_write_bytes(out_dir / "times.png", plot_png(records, f"{suite.name}: {len(suite.seeds)} seeds"))

@@ -1,6 +1,6 @@
 """The runs of a benchmark suite: the offline stages timed once per scene, then every
-(scene, planner, seed) run in a joblib (loky) worker, each inside a forked child process
-with a wall-clock budget.
+(scene, planner, seed) run in a joblib worker (loky processes here, or the workers of a
+Dask cluster), each inside a forked child process with a wall-clock budget.
 
 A run is what `regrasp plan` does online: the planner (double grasps, exchange pose, key
 configurations, the four queries with their lazy validation, timing; Saut et al. 2010
@@ -30,9 +30,11 @@ robot at rest), so that lengths compare across planners.
 from __future__ import annotations
 
 import functools
-import multiprocessing
 import os
+import pickle
 import resource
+import select
+import signal
 import sys
 import time
 import traceback
@@ -238,24 +240,61 @@ def _crash(item: RunItem, exc: BaseException, seconds: float) -> dict:
     return rec
 
 
-def _child(conn, item: RunItem, work: Callable[[RunItem], dict]) -> None:
+def _child(fd: int, item: RunItem, work: Callable[[RunItem], dict]) -> None:
     t0 = time.perf_counter()
     try:
         rec = work(item)
     except BaseException as exc:  # noqa: BLE001 - every failure becomes a record
         rec = _crash(item, exc, time.perf_counter() - t0)
     rec["peak_rss_mb"] = peak_rss_mb()
-    try:
-        conn.send(rec)
-    finally:
-        conn.close()
-        os._exit(0)  # no atexit handlers of the parent (pytest, joblib) in the fork
+    data = pickle.dumps(rec)
+    with os.fdopen(fd, "wb") as pipe:
+        pipe.write(len(data).to_bytes(8, "big") + data)
+
+
+def _whole(buf: bytearray) -> bytes | None:
+    if len(buf) >= 8 and len(buf) >= 8 + int.from_bytes(buf[:8], "big"):
+        return bytes(buf[8:])
+    return None
+
+
+def _await(fd: int, pid: int, deadline: float) -> tuple[bytes | None, int | None]:
+    """Wait for the child ``pid`` to send its record on the pipe ``fd`` (its length in 8
+    bytes, then its pickle) until ``deadline`` (a ``time.perf_counter`` value).  Returns
+    (pickle, status) once the record is whole, (None, status) when the child ended without
+    sending it, (None, None) when the deadline passed; ``status`` is the child's wait
+    status when it was reaped here, else None (the caller then kills and reaps it).
+
+    The child is polled as well as the pipe: in a Dask worker with several threads, the
+    child of a sibling run may hold a copy of this pipe's write end, so EOF can come late."""
+    buf = bytearray()
+    while (whole := _whole(buf)) is None:
+        left = deadline - time.perf_counter()
+        if left <= 0:
+            return None, None
+        if select.select([fd], [], [], min(left, 0.1))[0]:
+            chunk = os.read(fd, 1 << 16)
+            if chunk:
+                buf += chunk
+                continue
+            return None, os.waitpid(pid, 0)[1]  # EOF without a whole record: the child is gone
+        ended, status = os.waitpid(pid, os.WNOHANG)
+        if ended:
+            while select.select([fd], [], [], 0)[0] and (chunk := os.read(fd, 1 << 16)):
+                buf += chunk
+            if (whole := _whole(buf)) is None:
+                return None, status
+            return whole, status
+    return whole, None
 
 
 def run_one(item: RunItem, work: Callable[[RunItem], dict] = execute) -> dict:
     """``work(item)`` in a forked child process, killed after ``item.budget_s`` seconds;
     always returns a record.  The scene and artefacts are loaded here first (cached per
-    process, not counted in the budget), so the child inherits them."""
+    process, not counted in the budget), so the child inherits them.
+
+    The child is a plain ``os.fork`` with a pipe, not a ``multiprocessing.Process``: Dask
+    workers are daemonic processes, which multiprocessing forbids to have children."""
     t0 = time.perf_counter()
     try:
         if work is execute:
@@ -263,46 +302,67 @@ def run_one(item: RunItem, work: Callable[[RunItem], dict] = execute) -> dict:
                      item.grasp_target)
     except BaseException as exc:  # noqa: BLE001
         return _crash(item, exc, time.perf_counter() - t0)
-    ctx = multiprocessing.get_context("fork")
-    recv, send = ctx.Pipe(duplex=False)
-    child = ctx.Process(target=_child, args=(send, item, work), daemon=True)
+    recv, send = os.pipe()
     t0 = time.perf_counter()
-    child.start()
-    send.close()  # the child's end: EOF here when the child dies
+    pid = os.fork()
+    if pid == 0:  # the child: never returns into the caller (pytest, joblib, dask)
+        try:
+            os.close(recv)
+            _child(send, item, work)
+        finally:
+            os._exit(0)  # no atexit handlers of the parent in the fork
+    os.close(send)
+    status = None
     try:
-        if recv.poll(item.budget_s):
-            try:
-                return recv.recv()
-            except EOFError:
-                child.join()
-                rec = _base(item)
-                code = child.exitcode
-                how = f"killed by signal {-code}" if code is not None and code < 0 else f"exit code {code}"
-                rec.update({"stage": "crash", "reason": f"the run's process died ({how})",
-                            "total_s": time.perf_counter() - t0})
-                return rec
+        data, status = _await(recv, pid, t0 + item.budget_s)
+        if data is not None:
+            return pickle.loads(data)
         rec = _base(item)
-        rec.update({"stage": "budget", "reason": f"exceeded the budget of {item.budget_s:g} s (killed)",
+        if status is None:
+            rec.update({"stage": "budget", "reason": f"exceeded the budget of {item.budget_s:g} s (killed)",
+                        "total_s": time.perf_counter() - t0})
+            return rec
+        code = os.waitstatus_to_exitcode(status)
+        how = f"killed by signal {-code}" if code < 0 else f"exit code {code}"
+        rec.update({"stage": "crash", "reason": f"the run's process died ({how})",
                     "total_s": time.perf_counter() - t0})
         return rec
     finally:
-        if child.is_alive():
-            child.kill()
-        child.join()
-        recv.close()
+        os.close(recv)
+        if status is None:  # over budget, or done but not yet reaped
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            os.waitpid(pid, 0)
 
 
-def run_items(items: list[RunItem], jobs: int, on_record: Callable[[dict], None]) -> list[dict]:
-    """Every item in ``jobs`` loky processes (this process when jobs == 1), calling
-    ``on_record`` in this process as each record arrives (in item order)."""
-    from joblib import Parallel, delayed
+def forget_contexts() -> None:
+    """Drop the scenes and artefacts this process loaded for its runs (run on every Dask
+    worker before and after a suite: a cluster outlives one bench command)."""
+    _context.cache_clear()
 
+
+def run_items(items: list[RunItem], jobs: int, on_record: Callable[[dict], None], client=None) -> list[dict]:
+    """Every item in ``jobs`` loky processes (this process when jobs == 1), or, given a
+    connected ``distributed.Client``, on the workers of its Dask cluster (joblib's dask
+    backend, all the cluster's threads); calls ``on_record`` in this process as each
+    record arrives (in item order)."""
+    from joblib import Parallel, delayed, parallel_config
+
+    if client is None:
+        config = parallel_config(backend="loky")
+    else:
+        client.run(forget_contexts)
+        config = parallel_config(backend="dask", client=client)
     records = []
     try:
-        for rec in Parallel(n_jobs=jobs, backend="loky", return_as="generator")(delayed(run_one)(it)
-                                                                                 for it in items):
-            records.append(rec)
-            on_record(rec)
+        with config:
+            for rec in Parallel(n_jobs=jobs, return_as="generator")(delayed(run_one)(it) for it in items):
+                records.append(rec)
+                on_record(rec)
     finally:
         _context.cache_clear()
+        if client is not None:
+            client.run(forget_contexts)
     return records
