@@ -44,7 +44,7 @@ from regrasp_cli.model.objects import load_object_mesh
 from regrasp_cli.model.robot import Robot, load_robot
 from regrasp_cli.parallel import ordered_map, shared
 from regrasp_cli.plan.timing import segment_duration
-from regrasp_cli.roadmap.local import joint_reach
+from regrasp_cli.roadmap.local import held_reach, joint_reach
 from regrasp_cli.spatial import inverse, pose_error
 from regrasp_cli.store import sha256_file
 from regrasp_cli.trajectory import Phase, Plan, read_plan
@@ -510,9 +510,12 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
 def _phase_collisions(k: int) -> tuple[list[Issue], int, float]:
     j = shared()
     t0 = perf_counter()
-    phase = j["plan"].phases[k]
-    found, n = collision_issues(phase, phase_world(j["inputs"], phase, j["carries"][k]), j["reach"],
-                                j["resolution"], j["cartesian_step"])
+    phase, carry, inputs = j["plan"].phases[k], j["carries"][k], j["inputs"]
+    reach = j["reach"]
+    if carry.hand is not None:  # the held object reaches farther than the robot
+        reach = held_reach(inputs.robot, reach, carry.hand, np.asarray(inputs.mesh.vertices), carry.X_PO)
+    found, n = collision_issues(phase, phase_world(inputs, phase, carry), reach, j["resolution"],
+                                j["cartesian_step"])
     return found, n, perf_counter() - t0
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
 from regrasp_cli.model.ik import IKOptions
 from regrasp_cli.plan.handshape import palm_and_finger_links
-from regrasp_cli.roadmap.local import LocalPlanner, joint_reach
+from regrasp_cli.roadmap.local import LocalPlanner, held_reach, joint_reach
 from regrasp_cli.roadmap.rrt import RRTOptions
 from regrasp_cli.scene import Problem
 
@@ -70,6 +70,7 @@ class Scratch:
     local: LocalPlanner | None = None
 
     def __post_init__(self) -> None:
+        self._held: dict = {}  # local planners for a held object, by hand and placement
         self.local = LocalPlanner(self.options.resolution, self.options.cartesian_step / 2,
                                   joint_reach(self.problem.robot))
 
@@ -97,8 +98,18 @@ class Scratch:
             self.worlds[k] = w
         return Placed(w, X_PO)
 
-    def segment_free(self, world: CollisionWorld, q0: np.ndarray, q1: np.ndarray) -> bool:
-        return self.local.segment_free(world, q0, q1)
+    def segment_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray) -> bool:
+        obj = world.world.object
+        if obj is None or obj.attached_to is None:
+            return self.local.segment_free(world, q0, q1)
+        # a held object reaches farther than the robot: denser samples for its Cartesian bound
+        k = (obj.attached_to, np.round(world.X_PO, 12).tobytes())
+        local = self._held.get(k)
+        if local is None:
+            reach = held_reach(self.problem.robot, self.local.reach, obj.attached_to,
+                               np.asarray(self.problem.object.mesh.vertices), world.X_PO)
+            local = self._held[k] = LocalPlanner(self.local.resolution, self.local.margin, reach)
+        return local.segment_free(world, q0, q1)
 
     def path_free(self, world: CollisionWorld, path: np.ndarray) -> bool:
         return all(self.segment_free(world, a, b) for a, b in zip(path[:-1], path[1:]))

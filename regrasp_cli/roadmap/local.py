@@ -71,6 +71,16 @@ def joint_reach(robot: Robot) -> np.ndarray:
     return reach
 
 
+def held_reach(robot: Robot, reach: np.ndarray, hand: str, vertices_O: np.ndarray, X_GO: np.ndarray) -> np.ndarray:
+    """``reach`` (nq,) grown for an object held in ``hand`` at X_GO (4, 4): a point of the
+    object lies at most the grasp frame's offset from its joint plus the object's radius
+    about G from a point the joint carries, farther than any robot geometry may reach.
+    Conservatively added to every joint.  ``vertices_O`` (k, 3): the object's vertices."""
+    X_JG = robot.model.frames[robot.hands[hand].grasp_frame].placement.homogeneous
+    radius = float(np.max(np.linalg.norm(vertices_O @ X_GO[:3, :3].T + X_GO[:3, 3], axis=1)))
+    return reach + float(np.linalg.norm(X_JG[:3, 3])) + radius
+
+
 @dataclass(frozen=True)
 class LocalPlanner:
     """Certified straight-line local planner (see the module docstring)."""
