@@ -37,8 +37,11 @@ def shortest_path(edges: np.ndarray, lengths: np.ndarray, n_nodes: int, sources:
     if memo.invalid_nodes:
         keep &= ~np.isin(edges, np.fromiter(memo.invalid_nodes, dtype=np.int64)).any(axis=1)
     if memo.invalid_edges:
-        hidden = {tuple(sorted(e)) for e in memo.invalid_edges}
-        keep &= np.array([(int(a), int(b)) not in hidden for a, b in np.sort(edges, axis=1)], dtype=bool)
+        # one integer key per undirected edge, so that a re-search does not loop in Python
+        # over every edge of the graph
+        lo, hi = np.sort(edges, axis=1).T
+        hidden = np.array([min(e) * (n_nodes + 1) + max(e) for e in memo.invalid_edges], dtype=np.int64)
+        keep &= ~np.isin(lo * (n_nodes + 1) + hi, hidden)
     usable = lambda i: 0 <= i < n_nodes and i not in memo.invalid_nodes  # noqa: E731
     src = [(int(i), float(d)) for i, d in sources if usable(i)]
     dst = [(int(i), float(d)) for i, d in targets if usable(i)]
