@@ -6,10 +6,17 @@ once per attachment of the object, ~35 ms each, and moved to each placement), th
 generator and check counters.
 
 Segments that the roadmap did not certify (connections to key configurations, repairs,
-approach lines, finger motions) are checked densely: no joint moves more than
-``resolution`` and no robot point more than ``cartesian_step`` between two checked
-configurations (the Cartesian bound of :class:`roadmap.local.LocalPlanner`, without a
-clearance margin, since grasps touch the object and it touches its support).
+escape trees, approach lines, finger motions) are checked densely: no joint moves more than
+``resolution`` and no robot (or held-object) point more than ``cartesian_step`` between two
+checked configurations (the Cartesian bound of :class:`roadmap.local.LocalPlanner`).
+
+The worlds of the four queries are *certified* (``certify``): every pair except a hand's
+own links keeps ``cartesian_step / 2`` of clearance (a coal security margin) at the checked
+configurations, so every point between them is free too, up to the contact and support
+tolerances the pairs allow, and a finer check such as `regrasp validate` agrees.  The
+query ends (the far ends of the approach, lift and retreat lines) are chosen free with
+that clearance.  The short lines near contact (approach, lift, descent, finger motions)
+cannot keep a clearance from what they touch and stay sampled checks.
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ import numpy as np
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
 from regrasp_cli.model.ik import IKOptions
 from regrasp_cli.plan.handshape import palm_and_finger_links
+from regrasp_cli.roadmap.compose import margin_rule
 from regrasp_cli.roadmap.local import LocalPlanner, held_reach, joint_reach
 from regrasp_cli.roadmap.rrt import RRTOptions
 from regrasp_cli.scene import Problem
@@ -53,7 +61,9 @@ class OnlineOptions:
     escape_iterations: int = 1500  # tree growth from an end that no node sees
     repairs: int = 30  # graph re-searches per query before RRT-Connect takes over
     rrt: RRTOptions = RRTOptions(step=0.4, max_iterations=3000)
-    ompl_time: float = 10.0  # s: wall-clock guard of an ompl-rrtconnect query (its budget is rrt.max_iterations)
+    ompl_time: float = 60.0  # s: wall-clock guard of an ompl-rrtconnect query; its budget is rrt.max_iterations,
+    # like rrt-connect's, and 10 s cut it short on seeds where ours gets its full 3000
+    certify: bool = True  # query worlds keep cartesian_step / 2 of clearance (module docstring)
     shortcut_iterations: int = 12
     acceleration: float = 3.0  # rad/s^2 for every joint (URDFs carry no acceleration limits)
     ik: IKOptions = IKOptions(restarts=2, max_iters=40)
@@ -75,11 +85,14 @@ class Scratch:
                                   joint_reach(self.problem.robot))
 
     def world(self, X_PO: np.ndarray | None, attached: str | None = None, touching: tuple[str, ...] = (),
-              pair_filter=None, key: str = "") -> "Placed":
+              pair_filter=None, key: str = "", certified: bool = False) -> "Placed":
         """Self-collision + obstacles + the object at X_PO (in W, or in the grasp frame of
-        ``attached``).  Worlds are built once per attachment, touching hands and pair
-        filter (``key`` names the filter) and moved to each placement on use."""
-        k = (X_PO is None, attached, tuple(sorted(touching)), key)
+        ``attached``).  Worlds are built once per attachment, touching hands, pair filter
+        (``key`` names the filter) and clearance, and moved to each placement on use.
+        ``certified`` worlds keep the clearance of the module docstring when
+        ``options.certify`` is on."""
+        certified = certified and self.options.certify
+        k = (X_PO is None, attached, tuple(sorted(touching)), key, certified)
         w = self.worlds.get(k)
         if w is None:
             p = self.problem
@@ -92,11 +105,16 @@ class Scratch:
             def keep(a, b):
                 return base(a, b) and not ("object" in (a, b) and (a in rigid or b in rigid))
 
+            margin = margin_rule(p.robot, self.local.margin) if certified else None
             w = CollisionWorld(p.robot, p.spec.obstacles, p.disabled.links(), obj, p.collision_options,
-                               pair_filter=keep)
+                               pair_filter=keep, margin=margin)
             w.owner = None
             self.worlds[k] = w
-        return Placed(w, X_PO)
+        return Placed(w, X_PO, (X_PO, attached, tuple(touching), pair_filter, key))
+
+    def certified(self, world: "Placed") -> "Placed":
+        """The certified counterpart of ``world`` (itself when certification is off)."""
+        return self.world(*world.spec, certified=True)
 
     def segment_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray) -> bool:
         obj = world.world.object
@@ -124,8 +142,9 @@ class Placed:
     :class:`CollisionWorld` the planners use, moving the shared world's object first
     when another placement used it last."""
 
-    def __init__(self, world: CollisionWorld, X_PO: np.ndarray | None):
+    def __init__(self, world: CollisionWorld, X_PO: np.ndarray | None, spec: tuple = ()):
         self.world, self.X_PO = world, X_PO
+        self.spec = spec  # the arguments of Scratch.world that made it
 
     def _place(self) -> CollisionWorld:
         w = self.world

@@ -161,9 +161,11 @@ def preshapes(scratch: Scratch, hand: str, closed: np.ndarray) -> list[np.ndarra
 def _approach(scratch: Scratch, hand: str, q_pre: np.ndarray, centre_W: np.ndarray, world,
               directions_extra: tuple[np.ndarray, ...] = ()) -> np.ndarray | None:
     """Approach waypoints ending at ``q_pre`` (hand at the grasp pose, fingers pre-shaped),
-    starting with the fingers open ``approach_distance`` away; checked in ``world``."""
+    starting with the fingers open ``approach_distance`` away; checked in ``world``, the
+    start (a query's end) with the queries' clearance."""
     robot, o = scratch.problem.robot, scratch.options
     h = robot.hands[hand]
+    certified = scratch.certified(world)
     X_WG = robot.fk(q_pre, h.grasp_frame)
     away = X_WG[:3, 3] - centre_W
     back = -(X_WG[:3, :3] @ approach_axis(scratch, hand))
@@ -176,8 +178,10 @@ def _approach(scratch: Scratch, hand: str, q_pre: np.ndarray, centre_W: np.ndarr
             continue
         q_open = with_fingers(scratch, line[0], hand, h.open)
         if np.array_equal(q_open, line[0]):
-            return line
-        if world.is_free(q_open) and scratch.segment_free(world, q_open, line[0]):
+            if certified.is_free(line[0]):
+                return line
+            continue
+        if certified.is_free(q_open) and scratch.segment_free(world, q_open, line[0]):
             return np.vstack([q_open[None], line])
     return None
 
@@ -229,8 +233,8 @@ def single_configuration(scratch: Scratch, grasps: GraspList, k: int, X_WO: np.n
             continue
         lift = lift[::-1]
         w_held = scratch.world(inverse(X_OG), attached=hand, touching=(hand,))
-        if not scratch.path_free(w_held, lift):
-            continue
+        if not scratch.path_free(w_held, lift) or not scratch.certified(w_held).is_free(lift[-1]):
+            continue  # the top of the lift is a query's end: it keeps the queries' clearance
         approach = _approach(scratch, hand, q_pre, centre, w_free, (np.array([0.0, 0.0, 1.0]),))
         if approach is None:
             continue

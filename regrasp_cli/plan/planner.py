@@ -157,9 +157,9 @@ def phase_worlds(scratch: Scratch, X_PO: np.ndarray, attached: str | None, finge
         if not np.array_equal(values, robot.hands[hand].open):
             changed |= palm_and_finger_links(robot, hand)
     touching = (attached,) if attached else ()
-    full = scratch.world(X_PO, attached, touching)
+    full = scratch.world(X_PO, attached, touching, certified=True)
     lazy = scratch.world(X_PO, attached, touching, pair_filter=_lazy_filter(True, changed),
-                         key="lazy:" + ",".join(sorted(changed)))
+                         key="lazy:" + ",".join(sorted(changed)), certified=True)
     return PhaseWorlds(full, lazy, fingers)
 
 
@@ -243,6 +243,12 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         if not world.is_free(q):
             pairs = ", ".join("-".join(p) for p in world.colliding_pairs(q)[:3])
             raise PlanningFailed(stage, f"the robot's {what} configuration is in collision ({pairs})")
+        world = scratch.certified(world)
+        if not world.is_free(q):
+            pairs = ", ".join("-".join(p) for p in world.colliding_pairs(q)[:3])
+            raise PlanningFailed(stage, f"the robot's {what} configuration is closer than "
+                                        f"{1000 * scratch.local.margin:g} mm to an obstacle or itself ({pairs}); "
+                                        f"the query checks need that clearance")
 
     # ---------------------------------------------------------------- double grasps
     env = static_geometry(problem.spec.obstacles)

@@ -485,3 +485,76 @@ def test_the_other_hand_picks_when_the_nearer_one_cannot(problem, lists, monkeyp
               seed=0)
     assert out.giver == "right" and out.failure.stage == "exchange"
     assert out.stats["single_grasps"]["right"]["kept"] > 0 and out.stats["double_grasps"] > 0
+
+
+# ------------------------------------------------------------------ certified query worlds
+
+
+def just_below_the_hand(problem, X_WO: np.ndarray, gap: float = 0.002) -> np.ndarray:
+    """X_WO (where the object meets the right hand at rest) lowered 30 cm, then raised in
+    0.5 mm steps until the object touches the robot at rest, then lowered by ``gap``:
+    within ``gap`` of the robot, not touching it."""
+    q = problem.robot.q_rest
+    X_low = translated(X_WO, [0, 0, -0.3])
+    assert static_world(problem, X_low).is_free(q) and not static_world(problem, X_WO).is_free(q)
+    touch = next(dz for dz in np.arange(0.0, 0.3, 0.0005)
+                 if not static_world(problem, translated(X_low, [0, 0, dz])).is_free(q))
+    return translated(X_low, [0, 0, touch - gap])
+
+
+def test_query_worlds_keep_the_clearance_the_sampled_worlds_do_not(problem, blocked):
+    """The object is lowered onto the right hand at rest until it touches, then raised
+    2 mm: rest is free, but not with the queries' 5 mm clearance; with ``certify`` off
+    the query world is the plain one."""
+    X_WO, *_ = blocked
+    q = problem.robot.q_rest
+    scratch = new_scratch(problem)
+    plain = scratch.world(X_WO)
+    X_near = just_below_the_hand(problem, X_WO)
+    assert plain.world.object is not None and static_world(problem, X_near).is_free(q)
+    near = scratch.world(X_near)
+    assert near.is_free(q) and not scratch.certified(near).is_free(q)
+    assert scratch.certified(scratch.world(translated(X_near, [0, 0, -0.01]))).is_free(q)  # 12 mm: clear
+    off = new_scratch(problem, certify=False)
+    assert off.certified(off.world(X_near)).is_free(q)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_segments_the_certified_check_accepts_are_free_at_a_finer_resolution(problem, blocked, seed):
+    """Random segments of the right arm around the object: every one the query worlds'
+    check accepts is free when checked at 0.002 rad / 1 mm; some are refused that the
+    plain check at the same samples lets through or that do collide."""
+    X_WO, *_ = blocked
+    robot = problem.robot
+    scratch = new_scratch(problem, seed)
+    world = scratch.certified(scratch.world(X_WO))
+    fine = static_world(problem, X_WO)
+    arm = robot.hands["right"].arm_idx
+    rng = np.random.default_rng(seed)
+    accepted = refused = 0
+    for _ in range(40):
+        a, b = robot.q_rest.copy(), robot.q_rest.copy()
+        a[arm] += rng.normal(0.0, 0.4, len(arm))
+        b[arm] += rng.normal(0.0, 0.4, len(arm))
+        a, b = np.clip(a, robot.lower, robot.upper), np.clip(b, robot.lower, robot.upper)
+        if not (fine.is_free(a) and fine.is_free(b)):
+            continue
+        if scratch.segment_free(world, a, b):
+            accepted += 1
+            phase = Phase("test", (), (), np.array([a, b]), np.zeros(2))
+            issues, _ = collision_issues(phase, fine, joint_reach(robot), 0.002, 0.001)
+            assert not issues, issues
+        else:
+            refused += 1
+    assert accepted >= 5 and refused >= 1, (accepted, refused)
+
+
+def test_start_configuration_closer_than_the_clearance_fails_at_grasp(problem, lists, blocked):
+    """The object 2 mm below the right hand at rest: free, yet too close to certify the
+    query that leaves it."""
+    X_WO, *_ = blocked
+    X_near = just_below_the_hand(problem, X_WO)
+    out = run(problem_with(problem, X_WO_start=X_near), lists, None, OnlineOptions(planner="rrt-connect"), seed=0)
+    assert out.failure is not None and out.failure.stage == "grasp", out.failure
+    assert "closer than 5 mm" in out.failure.reason and "object" in out.failure.reason
+    assert out.phases == []
