@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 SCENE := configs/scenes/desk_handover.yaml
 
-.PHONY: demo test setup browser bench-collision bench-grasps bench-roadmap bench-plan bench clean
+.PHONY: demo test setup browser bench-collision bench-grasps bench-roadmap bench bench-hard bench-docs clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -46,12 +46,16 @@ bench-grasps: setup
 bench-roadmap: setup
 	$(BIN)/python scripts/bench_roadmap.py
 
-bench-plan: setup
-	$(BIN)/python scripts/bench_plan.py --out docs/bench_plan.md
-
-# the default benchmark suite (configs/bench/default.yaml): results in bench-results/default/
+# the benchmark suites (configs/bench/): results in bench-results/<suite>/; bench-docs
+# copies them into docs/bench/ and rewrites their tables in docs/BENCHMARKS.md
 bench: setup
 	$(BIN)/regrasp bench configs/bench/default.yaml
+
+bench-hard: setup
+	$(BIN)/regrasp bench configs/bench/hard.yaml
+
+bench-docs: setup
+	$(BIN)/python scripts/bench_docs.py
 
 clean:
 	rm -rf $(VENV) cache .pytest_cache

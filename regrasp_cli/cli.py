@@ -215,6 +215,8 @@ def show(plan_file: Path, html_file: Path | None, png_dir: Path | None, fps: int
 @click.option("--seeds", type=int, default=None, help="Override the suite's seeds with 0 .. N-1.")
 @click.option("--planners", default=None, metavar="A,B", help="Override the suite's planners.")
 @click.option("--budget-s", type=float, default=None, help="Override the suite's wall-clock budget per run (s).")
+@click.option("--iterations", type=int, default=None,
+              help="Override the suite's RRT-Connect iterations per query (every planner's).")
 @click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky", show_default=True,
               help="Where the runs go: local loky processes (--jobs at once), or the workers of an existing Dask "
                    "cluster (all its threads; needs --scheduler and pip install 'regrasp[dask]').")
@@ -223,7 +225,8 @@ def show(plan_file: Path, html_file: Path | None, png_dir: Path | None, fps: int
                    "see the cache and results folders at the same paths (a shared file system).")
 @click.pass_context
 def bench(ctx: click.Context, suite_file: Path, output: Path | None, jobs: int, seeds: int | None,
-          planners: str | None, budget_s: float | None, backend: str, scheduler: str | None) -> None:
+          planners: str | None, budget_s: float | None, backend: str, scheduler: str | None,
+          iterations: int | None) -> None:
     """Run a benchmark suite: every scene x planner x seed, each run in its own process
     with a time budget; write runs.jsonl, summary.md and times.png and print the tables.
 
@@ -231,7 +234,7 @@ def bench(ctx: click.Context, suite_file: Path, output: Path | None, jobs: int, 
     from regrasp_cli.bench.command import run_bench
 
     run_bench(suite_file, ctx.obj["cache_dir"], output, jobs, seeds, planners, budget_s,
-              backend=backend, scheduler=scheduler)
+              backend=backend, scheduler=scheduler, iterations=iterations)
 
 
 if __name__ == "__main__":  # pragma: no cover

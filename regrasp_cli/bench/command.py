@@ -66,7 +66,8 @@ def dask_client(scheduler: str | None):
 
 def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int, seeds: int | None = None,
               planners: str | None = None, budget_s: float | None = None,
-              console: Console | None = None, backend: str = "loky", scheduler: str | None = None) -> list[dict]:
+              console: Console | None = None, backend: str = "loky", scheduler: str | None = None,
+              iterations: int | None = None) -> list[dict]:
     """The `bench` command; returns the run records (sorted by scene, planner, seed).
     ``backend`` is ``loky`` (local processes) or ``dask`` (the cluster at ``scheduler``)."""
     console = console or Console()
@@ -78,20 +79,22 @@ def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int
         raise InputError(None, "--scheduler", "only for --backend dask")
     client = dask_client(scheduler) if backend == "dask" else None
     try:
-        return _run_bench(suite_file, cache_dir, out_dir, jobs, seeds, planners, budget_s, console, client)
+        return _run_bench(suite_file, cache_dir, out_dir, jobs, seeds, planners, budget_s, console, client,
+                          iterations)
     finally:
         if client is not None:
             client.close()
 
 
 def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int, seeds: int | None,
-               planners: str | None, budget_s: float | None, console: Console, client) -> list[dict]:
+               planners: str | None, budget_s: float | None, console: Console, client,
+               iterations: int | None = None) -> list[dict]:
     from regrasp_cli.bench.report import markdown, plot_png, print_tables
     from regrasp_cli.bench.runner import items_of, offline_stages, run_items
 
     err = Console(stderr=True)
     where = "loky" if client is None else f"dask at {client.scheduler.address}"
-    suite: Suite = with_overrides(load_suite(suite_file), seeds, planners, budget_s)
+    suite: Suite = with_overrides(load_suite(suite_file), seeds, planners, budget_s, iterations)
     out_dir = Path("bench-results") / suite.name if out_dir is None else Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(None, "--output", f"{out_dir} exists and is not a folder")
@@ -103,13 +106,14 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
     meta = {"machine": machine(), "suite": {"file": str(suite.file), "name": suite.name,
                                             "scenes": [str(s) for s in suite.scenes],
                                             "planners": list(suite.planners), "seeds": list(suite.seeds),
-                                            "budget_s": suite.budget_s, "roadmap_nodes": suite.roadmap_nodes,
+                                            "budget_s": suite.budget_s, "iterations": suite.iterations,
+                                            "roadmap_nodes": suite.roadmap_nodes,
                                             "grasp_target": suite.grasp_target},
             "jobs": jobs, "backend": where, "runs": len(items), "offline": offline}
     atomic_write_text(out_dir / "meta.json", json.dumps(meta, indent=1, default=_plain) + "\n")
     err.print(f"{len(items)} runs ({len(suite.scenes)} scene(s) x {len(suite.planners)} planner(s) x "
               f"{len(suite.seeds)} seed(s)), {f'{jobs} job(s)' if client is None else where}, "
-              f"budget {suite.budget_s:g} s per run")
+              f"budget {suite.budget_s:g} s per run, {suite.iterations} RRT-Connect iterations per query")
 
     done: list[dict] = []
 
@@ -129,7 +133,8 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
     m = meta["machine"]
     header = [f"# Benchmark `{suite.name}`", "",
               f"{m['date']}; {m['cpu']}, {m['cores']} cores, Python {m['python']}, regrasp {m['regrasp']}; "
-              f"{len(items)} runs, jobs={jobs}, budget {suite.budget_s:g} s per run; seeds "
+              f"{len(items)} runs, jobs={jobs}, budget {suite.budget_s:g} s per run, "
+              f"{suite.iterations} RRT-Connect iterations per query; seeds "
               f"{', '.join(map(str, suite.seeds)) if len(suite.seeds) <= 8 else f'{len(suite.seeds)} ({suite.seeds[0]}..)'}.",
               "", f"Each run in its own process (joblib workers: {where}; the run forked with its budget), planner "
               "jobs=1; a run is solved when the plan passes `regrasp validate`."]

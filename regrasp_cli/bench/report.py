@@ -7,14 +7,15 @@ from __future__ import annotations
 import io
 import math
 
-from regrasp_cli.bench.aggregate import (PLOT_PHASES, TABLE_ONE_COLUMNS, ordered, phase_medians, seed_ratios,
-                                         select, summarise, table_one)
+from regrasp_cli.bench.aggregate import (PLOT_PHASES, QUERIES, TABLE_ONE_COLUMNS, ordered, phase_medians,
+                                         seed_ratios, select, spread, summarise, table_one)
 
 SUMMARY_COLUMNS = ("scene", "planner", "solved", "success", "total median (s)", "total IQR (s)",
                    "planner median (s)", "validate median (s)", "path length median", "peak RSS (MB)",
                    "failures")
 RATIO_COLUMNS = ("scene", "planner / roadmap", "seeds both solved", "median ratio", "IQR", "min–max",
-                 "only roadmap solved", "only planner solved", "neither")
+                 "only roadmap solved", "only planner solved", "neither",
+                 "median ratio, failures at give-up (≥)")
 
 
 def _f(x, d: int = 2) -> str:
@@ -47,7 +48,8 @@ def ratio_rows(records: list[dict], reference: str = "roadmap", key: str = "tota
             r = q.ratio
             rows.append((scene, planner, str(r.n), f"{_f(r.median)}x" if r.n else "–",
                          f"{_f(r.q25)}–{_f(r.q75)}" if r.n else "–", f"{_f(r.min)}–{_f(r.max)}" if r.n else "–",
-                         str(q.only_reference), str(q.only_planner), str(q.neither)))
+                         str(q.only_reference), str(q.only_planner), str(q.neither),
+                         f"{_f(q.lower_bound.median)}x (n={q.lower_bound.n})" if q.lower_bound.n else "–"))
     return rows
 
 
@@ -60,6 +62,69 @@ def table_one_rows(records: list[dict]) -> dict[tuple[str, str], list[tuple[str,
             out[scene, planner] = [(q, _f(a, 0), _f(b), _f(c, 0), _f(d), _f(e, 0), _f(f))
                                    for q, a, b, c, d, e, f in table_one(ok)]
     return out
+
+
+# Saut et al. 2010, §VI and Table I (Justin, a 2010 dual-core Opteron): the figures our
+# tables are set against
+PAPER = {
+    "grasp lists": "about 1 min per hand; 17 (right) and 22 (left) grasps",
+    "roadmap": "about 5 min; 50 + 50 Vis-PRM nodes, about 1,700 Super Graph nodes",
+    "grasp configurations": "4.2 s single + 2.6 s double",
+    "queries": {"grasp": (68, 3.0), "carry": (71, 4.1), "place": (44, 2.3), "rest": (51, 2.1)},  # total n, T
+    "online": 11.6,  # s, the four queries with the roadmap (without the grasp configurations)
+    "single query": 35.0,  # s, the same with a single-query planner (RRT-Connect)
+}
+PAPER_COLUMNS = ("", "paper (§VI, Table I)", "ours")
+
+
+def paper_rows(records: list[dict], offline: dict[str, dict], scene: str, reference: str = "roadmap",
+               peer: str = "rrt-connect") -> list[tuple[str, str, str]]:
+    """Our numbers on ``scene`` beside the paper's: offline stages (as timed before the
+    runs: a cached artefact was loaded, not built), the grasp configurations, Table I's
+    totals per query and the online time of ``reference`` and of the single-query
+    ``peer``, with their per-seed ratio (medians over solved runs)."""
+    off = offline.get(scene, {})
+
+    def stage(name: str) -> str:
+        v = off.get(name)
+        if v is None:
+            return "–"
+        size = ", ".join(f"{k} {n}" for k, n in v.get("size", {}).items())
+        return f"{v['s']:.1f} s ({v['status']}){'; ' + size if size else ''}"
+
+    sg = off.get("super graph ready", {}).get("size", {})
+    roadmap = stage("roadmap") + (f"; {sg['nodes']:,} Super Graph nodes" if sg else "")
+    ok = select(records, scene, reference, solved=True)
+    grasps = spread(r["stages_s"].get("double grasps", 0.0) + r["stages_s"].get("exchange", 0.0) for r in ok)
+    rows = [("grasp lists", PAPER["grasp lists"], stage("grasp lists")),
+            ("roadmap", PAPER["roadmap"], roadmap),
+            ("single + double grasp configurations (and exchange pose)", PAPER["grasp configurations"],
+             f"{_f(grasps.median)} s" if grasps.n else "–")]
+    table = {row[0]: row for row in table_one(ok)}
+    for q in QUERIES:
+        n, t = PAPER["queries"][q]
+        ours = table.get(q)
+        rows.append((f"{q}: n, T", f"{n}, {t:.1f} s",
+                     "–" if ours is None or math.isnan(ours[5]) else f"{ours[5]:.0f}, {ours[6]:.2f} s"))
+    total = table.get("total")
+    rows.append((f"the four queries, {reference}", f"{PAPER['online']:.1f} s",
+                 "–" if total is None or math.isnan(total[6]) else f"{total[6]:.2f} s ({len(ok)} solved)"))
+    single = select(records, scene, peer)
+    if single:
+        solved = [r for r in single if r["solved"]]
+        t = table_one(solved)[-1][6] if solved else float("nan")
+        rows.append((f"the four queries, {peer}", f"{PAPER['single query']:.0f} s",
+                     f"{_f(t)} s ({len(solved)}/{len(single)} solved)" if solved else f"0/{len(single)} solved"))
+        # per run: Table I's total T (the four queries' planning + lazy validation)
+        derived = [dict(r, queries_s=sum(q["planning_s"] + q["validation_s"] for q in r.get("queries", {}).values()))
+                   for r in select(records, scene)]
+        ratio = seed_ratios(derived, scene, peer, reference, key="queries_s")
+        ours = (f"{_f(ratio.ratio.median)}x per seed ({ratio.ratio.n} both solved)" if ratio.ratio.n else "–")
+        if ratio.lower_bound.n:
+            ours += f"; ≥ {_f(ratio.lower_bound.median)}x counting failures ({ratio.lower_bound.n} seeds)"
+        rows.append((f"{peer} / {reference}, the four queries", f"{PAPER['single query'] / PAPER['online']:.1f}x",
+                     ours))
+    return rows
 
 
 def _md(columns, rows) -> list[str]:
@@ -82,11 +147,14 @@ def markdown(records: list[dict], header: list[str], offline: dict[str, dict], r
     L += _md(SUMMARY_COLUMNS, summary_rows(records, reference))
     rr = ratio_rows(records, reference)
     if rr:
-        L += ["", f"## Ratio to {reference}, per seed (total time; seeds where both solved)", ""]
+        L += ["", f"## Ratio to {reference}, per seed (total time; seeds where both solved)", "",
+              f"The last column takes every seed {reference} solved, a failure of the other planner counted at "
+              "the time it gave up: a lower bound, since solving would have taken longer.", ""]
         L += _md(RATIO_COLUMNS, rr)
         rp = ratio_rows(records, reference, key="planner_s")
         L += ["", "Same, planner time only (without writing and `regrasp validate`):", ""]
         L += _md(RATIO_COLUMNS, rp)
+    L += paper_section(records, offline, reference)
     L += ["", "## Table I (medians over solved runs; n nodes, T seconds)", "",
           "planning n: Super Graph nodes on the path + tree nodes; validation n: invalid edges found by the "
           "lazy checks; total: per run, planning + validation; the total row sums the four queries per run."]
@@ -101,6 +169,37 @@ def markdown(records: list[dict], header: list[str], offline: dict[str, dict], r
                   for r in fails])
     else:
         L.append("none")
+    return "\n".join(L) + "\n"
+
+
+def paper_section(records: list[dict], offline: dict[str, dict], reference: str = "roadmap") -> list[str]:
+    """The "next to the paper" tables, one per scene the reference ran on."""
+    L = []
+    for scene in ordered(r["scene"] for r in records):
+        if not select(records, scene, reference):
+            continue
+        L += ["", f"## Next to the paper: {scene}", "",
+              "The paper's numbers are for its own scene and robot (Justin), on 2010 hardware; ours are medians "
+              "over solved runs, T of a query being its planning plus its lazy path validation.", ""]
+        L += _md(PAPER_COLUMNS, paper_rows(records, offline, scene, reference))
+    return L
+
+
+def docs_block(records: list[dict], meta: dict, reference: str = "roadmap") -> str:
+    """What docs/BENCHMARKS.md shows of a results folder: its provenance, the runs and
+    ratio tables and the paper comparison (the rest stays in its summary.md)."""
+    m, suite = meta["machine"], meta["suite"]
+    L = [f"{m['date'][:10]}, {m['cpu']}, {m['cores']} cores, Python {m['python']}, regrasp {m['regrasp']}; "
+         f"{meta['runs']} runs of suite `{suite['name']}` ({len(suite['seeds'])} seeds, budget "
+         f"{suite['budget_s']:g} s per run, {suite.get('iterations', 3000)} RRT-Connect iterations per query), "
+         f"{meta['jobs']} at a time ({meta['backend']}).", ""]
+    L += _md(SUMMARY_COLUMNS, summary_rows(records, reference))
+    rr = ratio_rows(records, reference, key="planner_s")
+    if rr:
+        L += ["", f"Per-seed ratio of planner times to {reference} (without writing and `regrasp validate`; the last "
+                  "column counts failures at the time they gave up, a lower bound):", ""]
+        L += _md(RATIO_COLUMNS, rr)
+    L += paper_section(records, meta.get("offline", {}), reference)
     return "\n".join(L) + "\n"
 
 

@@ -38,7 +38,7 @@ import signal
 import sys
 import time
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -61,6 +61,7 @@ class RunItem:
     budget_s: float
     roadmap_nodes: int
     grasp_target: int | None
+    iterations: int = 3000  # RRT-Connect iterations per query (every planner)
 
 
 def scene_labels(suite: Suite) -> dict[Path, str]:
@@ -84,7 +85,7 @@ def items_of(suite: Suite, cache_dir: Path, plan_dir: Path) -> list[RunItem]:
                 name = f"{labels[scene]}-{planner}-{seed}".replace("/", "_").replace(os.sep, "_")
                 items.append(RunItem(labels[scene], str(scene), planner, seed, str(Path(cache_dir).resolve()),
                                      str((plan_dir / f"{name}.json").resolve()), suite.budget_s,
-                                     suite.roadmap_nodes, suite.grasp_target))
+                                     suite.roadmap_nodes, suite.grasp_target, suite.iterations))
     return items
 
 
@@ -195,7 +196,10 @@ def execute(item: RunItem) -> dict:
     problem, lists, roadmap, hashes, weights = _context(item.scene_file, item.cache_dir, item.planner == REFERENCE,
                                                         item.roadmap_nodes, item.grasp_target)
     rec = _base(item)
-    options = OnlineOptions(planner=item.planner, jobs=1)
+    # the same RRT-Connect budget for every planner; OMPL's wall-clock guard is the run's budget
+    default = OnlineOptions()
+    options = OnlineOptions(planner=item.planner, jobs=1, ompl_time=item.budget_s,
+                            rrt=replace(default.rrt, max_iterations=item.iterations))
     out_file = Path(item.plan_file)
     t0 = time.perf_counter()
     outcome = run(problem, lists, roadmap if item.planner == REFERENCE else None, options, item.seed)

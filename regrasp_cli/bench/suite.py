@@ -3,7 +3,10 @@
 Fields: ``name``; ``scenes`` (scene.yaml paths relative to the suite file); ``planners``
 (names of :data:`PLANNERS`); ``seeds`` (a count N, meaning 0 .. N-1, or a list of
 integers; default 20); ``budget_s`` (wall-clock seconds per run, default 60); optional
-``roadmap_nodes`` (default 50) and ``grasp_target`` (default: the grasp builder's).
+``iterations`` (RRT-Connect iterations per query, default 3000: the budget of the
+single-query planners, ours and OMPL's, and of the roadmap planner's fallback, so that
+every planner gets the same), ``roadmap_nodes`` (default 50) and ``grasp_target``
+(default: the grasp builder's).
 Every error is an :class:`~regrasp_cli.errors.InputError` naming the file and field.
 """
 
@@ -24,6 +27,7 @@ PLANNERS = ("roadmap", "rrt-connect", "ompl-rrtconnect")
 REFERENCE = "roadmap"
 DEFAULT_SEEDS = 20
 DEFAULT_BUDGET_S = 60.0
+DEFAULT_ITERATIONS = 3000  # OnlineOptions().rrt.max_iterations
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -37,6 +41,7 @@ class Suite:
     budget_s: float = DEFAULT_BUDGET_S
     roadmap_nodes: int = 50
     grasp_target: int | None = None
+    iterations: int = DEFAULT_ITERATIONS
 
 
 def _planners(file: Path | None, field: str, names: list) -> tuple[str, ...]:
@@ -54,7 +59,8 @@ def load_suite(path: str | Path) -> Suite:
     """Read and check a suite file."""
     file, data = read_yaml(path)
     f = Fields(file, data)
-    f.only("format", "name", "scenes", "planners", "seeds", "budget_s", "roadmap_nodes", "grasp_target")
+    f.only("format", "name", "scenes", "planners", "seeds", "budget_s", "iterations", "roadmap_nodes",
+           "grasp_target")
     fmt = f.str("format")
     if fmt != SUITE_FORMAT:
         raise f.error("format", f"expected {SUITE_FORMAT!r}, found {fmt!r}")
@@ -74,10 +80,12 @@ def load_suite(path: str | Path) -> Suite:
     seeds = seeds_of(file, "seeds", f.data.get("seeds", DEFAULT_SEEDS))
     budget = f.float("budget_s", DEFAULT_BUDGET_S, positive=True)
     nodes = f.int("roadmap_nodes", 50, minimum=1)
+    iterations = f.int("iterations", DEFAULT_ITERATIONS, minimum=1)
     target = f.data.get("grasp_target")
     if target is not None:
         target = f.int("grasp_target", minimum=0)
-    return Suite(file, name, scene_paths, _planners(file, "planners", planners), seeds, float(budget), nodes, target)
+    return Suite(file, name, scene_paths, _planners(file, "planners", planners), seeds, float(budget), nodes, target,
+                 iterations)
 
 
 def seeds_of(file: Path | None, field: str, value) -> tuple[int, ...]:
@@ -97,8 +105,9 @@ def seeds_of(file: Path | None, field: str, value) -> tuple[int, ...]:
 
 
 def with_overrides(suite: Suite, seeds: int | None = None, planners: str | None = None,
-                   budget_s: float | None = None) -> Suite:
-    """The suite with the command line's ``--seeds N``, ``--planners a,b`` and ``--budget-s``."""
+                   budget_s: float | None = None, iterations: int | None = None) -> Suite:
+    """The suite with the command line's ``--seeds N``, ``--planners a,b``, ``--budget-s``
+    and ``--iterations``."""
     if seeds is not None:
         suite = replace(suite, seeds=seeds_of(None, "--seeds", seeds))
     if planners is not None:
@@ -108,4 +117,8 @@ def with_overrides(suite: Suite, seeds: int | None = None, planners: str | None 
         if not (budget_s > 0 and math.isfinite(budget_s)):
             raise InputError(None, "--budget-s", f"expected a number of seconds > 0, found {budget_s}")
         suite = replace(suite, budget_s=float(budget_s))
+    if iterations is not None:
+        if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+            raise InputError(None, "--iterations", f"expected an integer >= 1, found {iterations}")
+        suite = replace(suite, iterations=iterations)
     return suite

@@ -64,7 +64,20 @@ def test_ratio_per_seed_only_where_both_solved():
     assert seed_ratios(RECORDS, "desk", "rrt-connect", key="planner_s").ratio.median == pytest.approx(3.5)
     row = ratio_rows(RECORDS)[0]
     assert row[:4] == ("desk", "rrt-connect", "2", "3.50x")
-    assert row[-3:] == ("2", "1", "1")
+    assert row[-4:-1] == ("2", "1", "1")
+
+
+def test_lower_bound_ratio_counts_failures_at_their_give_up_time():
+    """Over the seeds the roadmap solved (0-3): 3/1 and 8/2 solved by both, then
+    rrt-connect's failures at 5 s and 4 s against 3 s and 4 s: 3, 4, 5/3, 1."""
+    q = seed_ratios(RECORDS, "desk", "rrt-connect")
+    assert q.lower_bound.n == 4
+    assert q.lower_bound.median == pytest.approx((5 / 3 + 3.0) / 2)
+    assert (q.lower_bound.min, q.lower_bound.max) == (pytest.approx(1.0), pytest.approx(4.0))
+    assert ratio_rows(RECORDS)[0][-1] == "2.33x (n=4)"
+    # a run killed over its budget has no planner time: its total time counts
+    killed = [dict(r, planner_s=None) if r["planner"] == "rrt-connect" and r["seed"] == 3 else r for r in RECORDS]
+    assert seed_ratios(killed, "desk", "rrt-connect", key="planner_s").lower_bound.n == 4
 
 
 def test_table_one_layout_and_medians():

@@ -10,6 +10,7 @@ import yaml
 
 from regrasp_cli.bench.suite import PLANNERS, load_suite, with_overrides
 from regrasp_cli.errors import InputError
+from regrasp_cli.plan.context import OnlineOptions
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT = ROOT / "configs" / "bench" / "default.yaml"
@@ -28,8 +29,9 @@ def write(tmp_path: Path, **fields) -> Path:
 def test_default_suite():
     s = load_suite(DEFAULT)
     assert s.name == "default" and s.scenes == (SCENE.resolve(),)
-    assert s.planners == ("roadmap", "rrt-connect") and s.seeds == tuple(range(20))
+    assert s.planners == ("roadmap", "rrt-connect", "ompl-rrtconnect") and s.seeds == tuple(range(20))
     assert s.budget_s == 60.0 and s.roadmap_nodes == 50 and s.grasp_target is None
+    assert s.iterations == OnlineOptions().rrt.max_iterations == 3000  # the planners' own default
 
 
 def test_seeds_as_a_list_and_defaults(tmp_path):
@@ -51,6 +53,8 @@ def test_seeds_as_a_list_and_defaults(tmp_path):
     ({"seeds": [1, 1]}, "seeds", "twice"),
     ({"budget_s": 0}, "budget_s", "> 0"),
     ({"roadmap_nodes": 0}, "roadmap_nodes", ">= 1"),
+    ({"iterations": 0}, "iterations", ">= 1"),
+    ({"iterations": 2.5}, "iterations", "integer"),
     ({"grasp_target": "many"}, "grasp_target", "integer"),
     ({"extra": 1}, "extra", "unknown key"),
 ])
@@ -71,3 +75,6 @@ def test_overrides(tmp_path):
         with_overrides(s, seeds=0)
     with pytest.raises(InputError, match="--budget-s"):
         with_overrides(s, budget_s=-1.0)
+    assert with_overrides(s, iterations=20000).iterations == 20000
+    with pytest.raises(InputError, match="--iterations"):
+        with_overrides(s, iterations=0)
