@@ -140,6 +140,6 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
               "jobs=1; a run is solved when the plan passes `regrasp validate`."]
     atomic_write_text(out_dir / "summary.md", markdown(records, header, offline, REFERENCE))
     atomic_write_bytes(out_dir / "times.png", plot_png(records, f"{suite.name}: {len(suite.seeds)} seeds"))
-    print_tables(records, console, REFERENCE)
+    print_tables(records, console, REFERENCE, offline)
     console.print(f"results: {out_dir}/ (runs.jsonl, summary.md, times.png, meta.json, plans/)")
     return records

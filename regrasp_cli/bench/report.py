@@ -77,12 +77,13 @@ PAPER = {
 PAPER_COLUMNS = ("", "paper (§VI, Table I)", "ours")
 
 
-def paper_rows(records: list[dict], offline: dict[str, dict], scene: str, reference: str = "roadmap",
-               peer: str = "rrt-connect") -> list[tuple[str, str, str]]:
+def paper_rows(records: list[dict], offline: dict[str, dict], scene: str,
+               reference: str = "roadmap") -> list[tuple[str, str, str]]:
     """Our numbers on ``scene`` beside the paper's: offline stages (as timed before the
     runs: a cached artefact was loaded, not built), the grasp configurations, Table I's
-    totals per query and the online time of ``reference`` and of the single-query
-    ``peer``, with their per-seed ratio (medians over solved runs)."""
+    totals per query and the online time of ``reference`` and of every other planner of
+    the scene (single-query ones, set against the paper's RRT-Connect), with their
+    per-seed ratios (medians over solved runs)."""
     off = offline.get(scene, {})
 
     def stage(name: str) -> str:
@@ -109,17 +110,19 @@ def paper_rows(records: list[dict], offline: dict[str, dict], scene: str, refere
     total = table.get("total")
     rows.append((f"the four queries, {reference}", f"{PAPER['online']:.1f} s",
                  "–" if total is None or math.isnan(total[6]) else f"{total[6]:.2f} s ({len(ok)} solved)"))
-    single = select(records, scene, peer)
-    if single:
-        solved = [r for r in single if r["solved"]]
+    # per run: Table I's total T (the four queries' planning + lazy validation)
+    derived = [dict(r, queries_s=sum(q["planning_s"] + q["validation_s"] for q in r.get("queries", {}).values()))
+               for r in select(records, scene)]
+    for peer in ordered(r["planner"] for r in select(records, scene)):
+        if peer == reference:
+            continue
+        runs = select(records, scene, peer)
+        solved = [r for r in runs if r["solved"]]
         t = table_one(solved)[-1][6] if solved else float("nan")
         rows.append((f"the four queries, {peer}", f"{PAPER['single query']:.0f} s",
-                     f"{_f(t)} s ({len(solved)}/{len(single)} solved)" if solved else f"0/{len(single)} solved"))
-        # per run: Table I's total T (the four queries' planning + lazy validation)
-        derived = [dict(r, queries_s=sum(q["planning_s"] + q["validation_s"] for q in r.get("queries", {}).values()))
-                   for r in select(records, scene)]
+                     f"{_f(t)} s ({len(solved)}/{len(runs)} solved)" if solved else f"0/{len(runs)} solved"))
         ratio = seed_ratios(derived, scene, peer, reference, key="queries_s")
-        ours = (f"{_f(ratio.ratio.median)}x per seed ({ratio.ratio.n} both solved)" if ratio.ratio.n else "–")
+        ours = f"{_f(ratio.ratio.median)}x per seed ({ratio.ratio.n} both solved)" if ratio.ratio.n else "–"
         if ratio.lower_bound.n:
             ours += f"; ≥ {_f(ratio.lower_bound.median)}x counting failures ({ratio.lower_bound.n} seeds)"
         rows.append((f"{peer} / {reference}, the four queries", f"{PAPER['single query'] / PAPER['online']:.1f}x",
@@ -203,13 +206,13 @@ def docs_block(records: list[dict], meta: dict, reference: str = "roadmap") -> s
     return "\n".join(L) + "\n"
 
 
-def print_tables(records: list[dict], console, reference: str = "roadmap") -> None:
+def print_tables(records: list[dict], console, reference: str = "roadmap", offline: dict | None = None) -> None:
     from rich.table import Table
 
     def table(title, columns, rows):
         t = Table(title=title)
         for c in columns:
-            t.add_column(c, justify="left" if c in ("scene", "planner", "query", "failures") else "right")
+            t.add_column(c, justify="left" if c in ("scene", "planner", "query", "failures", "") else "right")
         for row in rows:
             t.add_row(*map(str, row))
         console.print(t)
@@ -220,6 +223,9 @@ def print_tables(records: list[dict], console, reference: str = "roadmap") -> No
         table(f"Ratio to {reference} per seed (total time)", RATIO_COLUMNS, rr)
     for (scene, planner), rows in table_one_rows(records).items():
         table(f"Table I: {scene}, {planner} (medians over solved runs)", TABLE_ONE_COLUMNS, rows)
+    for scene in ordered(r["scene"] for r in records):
+        if select(records, scene, reference):
+            table(f"Next to the paper: {scene}", PAPER_COLUMNS, paper_rows(records, offline or {}, scene, reference))
 
 
 def plot_png(records: list[dict], title: str) -> bytes:
