@@ -19,6 +19,22 @@ from regrasp_cli.errors import InputError
 from regrasp_cli.store import atomic_write_bytes, atomic_write_text
 
 
+LIBRARIES = ("pin", "coal", "numpy", "scipy", "ompl")  # distributions whose versions a result depends on
+
+
+def versions() -> dict[str, str]:
+    """Installed versions of :data:`LIBRARIES` (absent ones left out)."""
+    from importlib import metadata
+
+    out = {}
+    for name in LIBRARIES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
 def machine() -> dict:
     cpu = "?"
     try:
@@ -27,7 +43,7 @@ def machine() -> dict:
     except OSError:
         cpu = platform.processor() or "?"
     return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
-            "platform": platform.platform(), "regrasp": __version__,
+            "platform": platform.platform(), "regrasp": __version__, "libraries": versions(),
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
 
 
@@ -132,7 +148,8 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
 
     m = meta["machine"]
     header = [f"# Benchmark `{suite.name}`", "",
-              f"{m['date']}; {m['cpu']}, {m['cores']} cores, Python {m['python']}, regrasp {m['regrasp']}; "
+              f"{m['date']}; {m['cpu']}, {m['cores']} cores, Python {m['python']}, regrasp {m['regrasp']} "
+              f"({', '.join(f'{k} {v}' for k, v in m['libraries'].items())}); "
               f"{len(items)} runs, jobs={jobs}, budget {suite.budget_s:g} s per run, "
               f"{suite.iterations} RRT-Connect iterations per query; seeds "
               f"{', '.join(map(str, suite.seeds)) if len(suite.seeds) <= 8 else f'{len(suite.seeds)} ({suite.seeds[0]}..)'}.",

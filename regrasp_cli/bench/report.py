@@ -192,7 +192,9 @@ def docs_block(records: list[dict], meta: dict, reference: str = "roadmap") -> s
     """What docs/BENCHMARKS.md shows of a results folder: its provenance, the runs and
     ratio tables and the paper comparison (the rest stays in its summary.md)."""
     m, suite = meta["machine"], meta["suite"]
-    L = [f"{m['date'][:10]}, {m['cpu']}, {m['cores']} cores, Python {m['python']}, regrasp {m['regrasp']}; "
+    libs = ", ".join(f"{k} {v}" for k, v in m.get("libraries", {}).items())
+    L = [f"{m['date'][:10]}, {m['cpu']}, {m['cores']} cores, Python {m['python']}, regrasp {m['regrasp']}"
+         f"{f' ({libs})' if libs else ''}; "
          f"{meta['runs']} runs of suite `{suite['name']}` ({len(suite['seeds'])} seeds, budget "
          f"{suite['budget_s']:g} s per run, {suite.get('iterations', 3000)} RRT-Connect iterations per query), "
          f"{meta['jobs']} at a time ({meta['backend']}).", ""]

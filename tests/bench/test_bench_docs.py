@@ -13,7 +13,7 @@ from bench.test_aggregate import RECORDS
 
 SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "bench_docs.py"
 META = {"machine": {"date": "2026-11-22T18:00:00+00:00", "cpu": "Test CPU", "cores": 2, "python": "3.11.7",
-                    "regrasp": "0.1.0"},
+                    "regrasp": "0.1.0", "libraries": {"pin": "4.1.0", "ompl": "2.0.1"}},
         "suite": {"name": "tiny", "seeds": list(range(6)), "budget_s": 60.0, "iterations": 3000},
         "jobs": 2, "backend": "loky", "runs": len(RECORDS),
         "offline": {"desk": {"grasp lists": {"s": 5.0, "status": "built", "size": {"right": 121, "left": 120}}}}}
@@ -47,7 +47,7 @@ def test_the_block_is_rewritten_from_the_records(tmp_path):
     text = (d / "BENCHMARKS.md").read_text()
     assert text.startswith("# Benchmarks\n\nbefore\n<!-- bench:tiny -->\n") and text.endswith("<!-- /bench:tiny -->\nafter\n")
     assert "old table" not in text
-    assert "Test CPU, 2 cores" in text and "3000 RRT-Connect iterations per query" in text
+    assert "Test CPU, 2 cores" in text and "regrasp 0.1.0 (pin 4.1.0, ompl 2.0.1)" in text and "3000 RRT-Connect iterations per query" in text
     assert "| desk | roadmap | 4/6 | 67 % |" in text  # aggregated again from runs.jsonl
     assert "| desk | rrt-connect | 2 | 3.50x |" in text  # planner time ratio: total / 2 in the records
     assert "## Next to the paper: desk" in text and "| the four queries, roadmap | 11.6 s |" in text

@@ -59,6 +59,7 @@ def test_tiny_suite_end_to_end(cache_dir, tmp_path):
     assert "| desk_handover | grasp lists |" in text and "| right 2" in text
     assert (out / "times.png").read_bytes().startswith(PNG)
     meta = json.loads((out / "meta.json").read_text())
+    assert "pin" in meta["machine"]["libraries"] and "coal" in meta["machine"]["libraries"]
     assert meta["runs"] == 2 and meta["offline"]["desk_handover"]["grasp lists"]["status"] in ("built", "cached")
     assert "Table I: desk_handover, roadmap" in r.stdout
 
