@@ -1,7 +1,8 @@
 """`regrasp bench SUITE.yaml`: run a benchmark suite and write its results folder:
 ``runs.jsonl`` (one record per run, rewritten atomically as runs finish), ``summary.md``
-(the tables), ``times.png`` (time per phase per planner) and ``meta.json`` (machine,
-suite, offline stages); the tables are also printed."""
+(the tables), ``times.png`` (time per phase per planner), ``meta.json`` (machine,
+suite, offline stages, wall time) and ``ompl/<scene>.log`` (OMPL's benchmark log format,
+see :mod:`regrasp_cli.bench.ompllog`); the tables are also printed."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import datetime
 import json
 import os
 import platform
+import time
 from pathlib import Path
 
 from rich.console import Console
@@ -105,6 +107,7 @@ def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int
 def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int, seeds: int | None,
                planners: str | None, budget_s: float | None, console: Console, client,
                iterations: int | None = None) -> list[dict]:
+    from regrasp_cli.bench.ompllog import scene_logs
     from regrasp_cli.bench.report import markdown, plot_png, print_tables
     from regrasp_cli.bench.runner import items_of, offline_stages, run_items
 
@@ -141,7 +144,10 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
                   markup=False, highlight=False)
         atomic_write_text(out_dir / "runs.jsonl", jsonl(done))
 
+    t0 = time.perf_counter()
     run_items(items, jobs, on_record, client)
+    meta["wall_s"] = time.perf_counter() - t0
+    atomic_write_text(out_dir / "meta.json", json.dumps(meta, indent=1, default=_plain) + "\n")
     rank = {p: i for i, p in enumerate(suite.planners)}
     records = sorted(done, key=lambda r: (r["scene"], rank[r["planner"]], r["seed"]))
     atomic_write_text(out_dir / "runs.jsonl", jsonl(records))
@@ -157,6 +163,9 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
               "jobs=1; a run is solved when the plan passes `regrasp validate`."]
     atomic_write_text(out_dir / "summary.md", markdown(records, header, offline, REFERENCE))
     atomic_write_bytes(out_dir / "times.png", plot_png(records, f"{suite.name}: {len(suite.seeds)} seeds"))
+    for name, log in scene_logs(records, meta).items():  # for ompl_benchmark_statistics and Planner Arena
+        (out_dir / "ompl").mkdir(exist_ok=True)
+        atomic_write_text(out_dir / "ompl" / name, log)
     print_tables(records, console, REFERENCE, offline)
-    console.print(f"results: {out_dir}/ (runs.jsonl, summary.md, times.png, meta.json, plans/)")
+    console.print(f"results: {out_dir}/ (runs.jsonl, summary.md, times.png, meta.json, ompl/*.log, plans/)")
     return records

@@ -58,6 +58,8 @@ def test_tiny_suite_end_to_end(cache_dir, tmp_path):
     assert "### desk_handover, roadmap" in text and "| total |" in text
     assert "| desk_handover | grasp lists |" in text and "| right 2" in text
     assert (out / "times.png").read_bytes().startswith(PNG)
+    log = (out / "ompl" / "desk_handover.log").read_text()  # OMPL's benchmark log (tests/bench/test_ompllog.py)
+    assert log.startswith("regrasp version") and "Experiment tiny-desk_handover" in log and "2 runs" in log
     meta = json.loads((out / "meta.json").read_text())
     assert "pin" in meta["machine"]["libraries"] and "coal" in meta["machine"]["libraries"]
     assert meta["runs"] == 2 and meta["offline"]["desk_handover"]["grasp lists"]["status"] in ("built", "cached")
