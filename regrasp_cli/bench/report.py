@@ -97,7 +97,7 @@ def paper_rows(records: list[dict], offline: dict[str, dict], scene: str,
     roadmap = stage("roadmap") + (f"; {sg['nodes']:,} Super Graph nodes" if sg else "")
     ok = select(records, scene, reference, solved=True)
     grasps = spread(r["stages_s"].get("double grasps", 0.0) + r["stages_s"].get("exchange", 0.0) for r in ok)
-    rows = [("grasp lists", PAPER["grasp lists"], stage("grasp lists")),
+    rows = [("grasp lists (ours: both hands, 2 processes)", PAPER["grasp lists"], stage("grasp lists")),
             ("roadmap", PAPER["roadmap"], roadmap),
             ("single + double grasp configurations (and exchange pose)", PAPER["grasp configurations"],
              f"{_f(grasps.median)} s" if grasps.n else "–")]

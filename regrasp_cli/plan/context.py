@@ -54,6 +54,7 @@ class OnlineOptions:
     exchange_sigma: float = 0.04  # m, position spread of those samples
     exchange_angle_sigma: float = 0.15  # rad, orientation spread
     double_grasps_tried: int = 10
+    key_attempts: int = 3  # double grasps (with their exchange) tried in turn when a query fails
     resolution: float = 0.02  # rad: dense segment check
     cartesian_step: float = 0.01  # m: dense segment check
     k_connect: int = 40  # nearest Super Graph nodes tried when connecting a configuration

@@ -179,7 +179,8 @@ def _query_job(name: str):
     j = shared()
     scratch, roadmap = j["scratch"], j["roadmap"]
     a, b, worlds = j["queries"][name]
-    scratch.rng = np.random.default_rng([j["seed"], QUERY_NAMES.index(name)])
+    k = QUERY_NAMES.index(name)  # the first attempt's streams, then one per attempt
+    scratch.rng = np.random.default_rng([j["seed"], k] if j["attempt"] == 0 else [j["seed"], k, j["attempt"]])
     qs, before = QueryStats(), scratch.checks
     try:
         if scratch.options.planner == "ompl-rrtconnect":
@@ -212,6 +213,72 @@ def _double_grasps(scratch: Scratch, lists: dict[str, GraspList], shapes: dict, 
     doubles = double_grasps(cfg_g, lists[g], shapes[g], cfg_t, lists[t], shapes[t])
     out.stats["double_grasps"] = len(doubles)
     return doubles or f"all {len(cfg_g)} x {len(cfg_t)} grasp pairs make the hands collide"
+
+
+def _exchanges(scratch: Scratch, doubles: list[DoubleGrasp], lists: dict[str, GraspList], env: StaticGeometry,
+               obj: HandShape, g: str, options: OnlineOptions, out: Outcome):
+    """(double grasp, exchange configuration) pairs, best double grasp first: for each of
+    the best ``double_grasps_tried``, the exchange pose of Fig. 6 and then Gaussian
+    samples around it until both arms reach one (a generator: the next pair is searched
+    only when a query of the previous one failed)."""
+    t, o = OTHER[g], options
+    out.stats["double_grasps_tried"] = 0
+    for dg in doubles[:o.double_grasps_tried]:
+        out.stats["double_grasps_tried"] += 1
+        X_c, _ = exchange_pose(scratch, dg, lists, env, obj)
+        if X_c is None:
+            continue
+        for s in range(o.exchange_samples):
+            X = X_c if s == 0 else _perturbed(scratch, X_c, obj)
+            if s and hand_hits_static(obj, X, env, EXCHANGE_CLEARANCE):
+                continue
+            ex = exchange_configuration(scratch, lists[g], dg.giver.grasp, lists[t], dg.taker.grasp, X)
+            if ex is not None:
+                yield dg, ex
+                break
+
+
+def _queries(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarray, seed: int, attempt: int, g: str,
+             lists: dict[str, GraspList], out: Outcome) -> tuple[tuple[str, str] | None, dict]:
+    """The four queries between the key configurations of ``out.double`` and
+    ``out.exchange``; their counts and times are added to ``out``.  Returns the first
+    failing query (in plan order) with its reason, or None, and the paths found."""
+    problem, options = scratch.problem, scratch.options
+    robot, task, t = problem.robot, problem.spec.task, OTHER[g]
+    dg, ex = out.double, out.exchange
+    sg, st = dg.giver, dg.taker
+    open_ = {h: robot.hands[h].open for h in (g, t)}
+    closed = {g: lists[g].finger_q[sg.grasp], t: lists[t].finger_q[st.grasp]}
+    X_GO = {g: inverse(lists[g].X_OG[sg.grasp]), t: inverse(lists[t].X_OG[st.grasp])}
+    queries = {
+        "grasp": (problem.q_start, sg.approach[0], phase_worlds(scratch, task.X_WO_start, None, open_)),
+        "carry": (sg.lift[-1], ex.approach[0], phase_worlds(scratch, X_GO[g], g, {g: closed[g], t: open_[t]})),
+        "place": (ex.retreat[-1], st.lift[-1], phase_worlds(scratch, X_GO[t], t, {g: open_[g], t: closed[t]})),
+        "rest": (st.approach[0], problem.q_goal, phase_worlds(scratch, task.X_WO_goal, None, open_)),
+    }
+    # the queries are independent once the key configurations are fixed: each has its own
+    # random stream, so they give the same paths run in turn or in parallel
+    job = {"scratch": scratch, "roadmap": roadmap, "weights": weights, "seed": seed, "attempt": attempt,
+           "queries": queries}
+    rng = scratch.rng  # an in-process query replaces it with its own stream
+    try:
+        results = {r[0]: r for r in ordered_map(_query_job, ["place", "rest", "grasp", "carry"],  # longest first
+                                                 options.jobs, job)}
+    finally:
+        scratch.rng = rng
+    paths = {}
+    for name in QUERY_NAMES:
+        _, path, qs, error, checks = results[name]
+        st_q = out.stats.setdefault("queries", {}).setdefault(name, dict.fromkeys(
+            ("nodes", "searches", "invalid_edges", "rrt_calls"), 0))
+        for k in st_q:
+            st_q[k] += getattr(qs, k)
+        out.timing[f"{name} planning"] = out.timing.get(f"{name} planning", 0.0) + qs.planning
+        out.timing[f"{name} validation"] = out.timing.get(f"{name} validation", 0.0) + qs.validation
+        out.stats["query_checks"] = out.stats.get("query_checks", 0) + checks
+        paths[name] = path
+    failed = next((n for n in QUERY_NAMES if results[n][3] is not None), None)
+    return (None if failed is None else (failed, results[failed][3])), paths
 
 
 def run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
@@ -268,63 +335,33 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     out.giver = g
     t0 = _clock(out, "double grasps", t0)
 
-    # ---------------------------------------------------------------- exchange
-    obj = _object_shape(problem)
-    tried = 0
-    for dg in doubles[:options.double_grasps_tried]:
-        tried += 1
-        X_c, _ = exchange_pose(scratch, dg, lists, env, obj)
-        if X_c is None:
-            continue
-        for s in range(options.exchange_samples):
-            X = X_c if s == 0 else _perturbed(scratch, X_c, obj)
-            if s and hand_hits_static(obj, X, env, EXCHANGE_CLEARANCE):
-                continue
-            ex = exchange_configuration(scratch, lists[g], dg.giver.grasp, lists[t], dg.taker.grasp, X)
-            if ex is not None:
-                out.double, out.exchange = dg, ex
-                break
-        if out.exchange is not None:
+    # ---------------------------------------------------------------- exchange and queries
+    # key configurations (a double grasp with its exchange configuration), best double
+    # grasp first; when a query fails, the next set is tried, key_attempts in all
+    candidates = _exchanges(scratch, doubles, lists, env, _object_shape(problem), g, options, out)
+    failure, paths = None, {}
+    for attempt in range(options.key_attempts):
+        found = next(candidates, None)
+        t0 = _clock(out, "exchange", t0)
+        if found is None:
             break
-    out.stats["double_grasps_tried"] = tried
-    t0 = _clock(out, "exchange", t0)
+        out.double, out.exchange = found
+        out.stats["key_attempts"] = attempt + 1
+        failure, paths = _queries(scratch, roadmap, weights, seed, attempt, g, lists, out)
+        t0 = _clock(out, "queries", t0)
+        if failure is None:
+            break
     if out.exchange is None:
-        raise PlanningFailed("exchange", f"no reachable collision-free exchange pose for the best {tried} double "
-                             f"grasps ({options.exchange_samples} samples each)")
-
-    # ---------------------------------------------------------------- queries
+        raise PlanningFailed("exchange", f"no reachable collision-free exchange pose for the best "
+                             f"{out.stats['double_grasps_tried']} double grasps ({options.exchange_samples} "
+                             f"samples each)")
+    if failure is not None:
+        stage, reason = failure
+        n = out.stats["key_attempts"]
+        raise PlanningFailed(stage, reason if n == 1 else f"{reason} (the last of {n} double grasps with their "
+                                                         f"exchange tried)")
     dg, ex = out.double, out.exchange
     sg, st = dg.giver, dg.taker
-    open_ = {h: robot.hands[h].open for h in (g, t)}
-    closed = {g: lists[g].finger_q[sg.grasp], t: lists[t].finger_q[st.grasp]}
-    X_GO = {g: inverse(lists[g].X_OG[sg.grasp]), t: inverse(lists[t].X_OG[st.grasp])}
-
-    queries = {
-        "grasp": (problem.q_start, sg.approach[0], phase_worlds(scratch, task.X_WO_start, None, open_)),
-        "carry": (sg.lift[-1], ex.approach[0], phase_worlds(scratch, X_GO[g], g, {g: closed[g], t: open_[t]})),
-        "place": (ex.retreat[-1], st.lift[-1], phase_worlds(scratch, X_GO[t], t, {g: open_[g], t: closed[t]})),
-        "rest": (st.approach[0], problem.q_goal, phase_worlds(scratch, task.X_WO_goal, None, open_)),
-    }
-    # the queries are independent once the key configurations are fixed: each has its own
-    # random stream, so they give the same paths run in turn or in parallel
-    checks_before = scratch.checks + out.stats["single_checks"] if options.jobs > 1 else scratch.checks
-    job = {"scratch": scratch, "roadmap": roadmap, "weights": weights, "seed": seed, "queries": queries}
-    order = ["place", "rest", "grasp", "carry"]  # longest first
-    results = {r[0]: r for r in ordered_map(_query_job, order, options.jobs, job)}
-    paths = {}
-    for name in QUERY_NAMES:
-        _, path, qs, error, checks = results[name]
-        out.stats.setdefault("queries", {})[name] = {"nodes": qs.nodes, "searches": qs.searches,
-                                                     "invalid_edges": qs.invalid_edges, "rrt_calls": qs.rrt_calls}
-        out.timing[f"{name} planning"] = qs.planning
-        out.timing[f"{name} validation"] = qs.validation
-        out.stats["query_checks"] = out.stats.get("query_checks", 0) + checks
-        paths[name] = path
-    failed = next((n for n in QUERY_NAMES if results[n][3] is not None), None)
-    if failed is not None:
-        _clock(out, "queries", t0)
-        raise PlanningFailed(failed, results[failed][3])
-    t0 = _clock(out, "queries", t0)
 
     # ---------------------------------------------------------------- phases and timing
     def cat(*parts) -> np.ndarray:
@@ -354,5 +391,7 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         clock = float(times[-1])
         out.phases.append(PhaseMotion(name, holding, touching, w, times))
     out.stats["waypoints"] = int(sum(len(m[3]) for m in motions))
-    out.stats["checks"] = checks_before + out.stats["query_checks"]  # the workers' checks included
+    # every check, the workers' included (with one job they ran on this scratch)
+    out.stats["checks"] = scratch.checks + (out.stats["single_checks"] + out.stats["query_checks"]
+                                            if options.jobs > 1 else 0)
     _clock(out, "timing", t0)

@@ -122,9 +122,9 @@ def test_without_the_extra_the_error_names_it(monkeypatch):
 
 
 def test_the_whole_plan_runs_on_ompl_and_a_solved_one_is_valid(problem, lists, cache_dir, tmp_path):
-    """The default budget (3000 iterations a query) does not let OMPL's RRT-Connect solve
-    the place or rest query of the small scene for seeds 0-7 (ours solves some), so the plan
-    either fails at a query with OMPL named, or is solved and then must validate."""
+    """With the default budget (3000 iterations a query) OMPL's RRT-Connect often fails the
+    place or rest query, so the plan either fails at a query with OMPL named, or is solved
+    and then must validate.  OMPL ran the grasp and carry queries of every attempt."""
     from regrasp_cli.plan.command import make_plan
     from regrasp_cli.trajectory import write_plan
     from regrasp_cli.validate import validate_plan
@@ -132,7 +132,9 @@ def test_the_whole_plan_runs_on_ompl_and_a_solved_one_is_valid(problem, lists, c
     options = OnlineOptions(planner="ompl-rrtconnect", jobs=1, ompl_time=NO_CLOCK)
     out = run(problem, lists, None, options, PLAN_SEED)
     queries = out.stats["queries"]
-    assert queries["grasp"]["rrt_calls"] == 1 and queries["carry"]["rrt_calls"] == 1  # OMPL ran them
+    attempts = out.stats["key_attempts"]
+    assert 1 <= attempts <= options.key_attempts
+    assert queries["grasp"]["rrt_calls"] == attempts and queries["carry"]["rrt_calls"] == attempts
     plan_file = tmp_path / "ompl.json"
     plan = make_plan(problem, lists, out, options, PLAN_SEED, plan_file, cache_dir, {}, timings=False)
     write_plan(plan_file, plan)

@@ -371,10 +371,15 @@ def test_a_one_iteration_rrt_budget_fails_in_a_query(problem, lists):
     assert "RRT-Connect" in out.failure.reason and "1 iteration" in out.failure.reason
     assert out.phases == []
     # the stages before the queries succeeded; the stage named is the first query (in
-    # plan order) that failed, each query up to it made its one RRT-Connect call
+    # plan order) that failed, each query up to it made one RRT-Connect call per attempt,
+    # and every attempt failed (as many as there were double grasps with an exchange, up
+    # to key_attempts: the small lists give 2)
     assert out.double is not None and out.exchange is not None
+    attempts = out.stats["key_attempts"]
+    assert 2 <= attempts <= OnlineOptions().key_attempts
+    assert f"the last of {attempts} double grasps" in out.failure.reason
     tried = QUERIES[:QUERIES.index(out.failure.stage) + 1]
-    assert all(out.stats["queries"][q]["rrt_calls"] == 1 for q in tried)
+    assert all(out.stats["queries"][q]["rrt_calls"] == attempts for q in tried)
 
 
 @pytest.fixture(scope="module")
@@ -558,3 +563,37 @@ def test_start_configuration_closer_than_the_clearance_fails_at_grasp(problem, l
     assert out.failure is not None and out.failure.stage == "grasp", out.failure
     assert "closer than 5 mm" in out.failure.reason and "object" in out.failure.reason
     assert out.phases == []
+
+
+# ------------------------------------------------------------------ retries
+
+
+def test_a_failed_query_is_retried_with_the_next_double_grasp(problem, lists, roadmap, monkeypatch):
+    """The first set of key configurations is made to fail at `place`: the planner takes
+    the next double grasp with its own exchange and solves; with one attempt allowed it
+    fails at `place`.  The work of both attempts is counted."""
+    import regrasp_cli.plan.planner as planner
+
+    real, seen, after_first = planner._queries, [], {}
+
+    def first_fails(scratch, roadmap, weights, seed, attempt, g, lists, out):
+        seen.append((attempt, out.double))
+        failure, paths = real(scratch, roadmap, weights, seed, attempt, g, lists, out)
+        if attempt == 0:
+            after_first.update({q: (dict(out.stats["queries"][q]), out.timing[f"{q} planning"]) for q in QUERIES})
+            return ("place", "made to fail"), paths
+        return failure, paths
+
+    monkeypatch.setattr(planner, "_queries", first_fails)
+    out = run(problem, lists, roadmap, OnlineOptions(jobs=1), seed=0)
+    assert out.failure is None, out.failure
+    assert [a for a, _ in seen] == [0, 1] and seen[0][1] is not seen[1][1]
+    assert out.double is seen[1][1] and out.stats["key_attempts"] == 2
+    assert out.stats["double_grasps_tried"] >= 2
+    for q, (counts, planning) in after_first.items():  # the second attempt's work added to the first's
+        assert out.timing[f"{q} planning"] > planning
+        assert all(out.stats["queries"][q][k] >= v for k, v in counts.items())
+    seen.clear()
+    once = run(problem, lists, roadmap, OnlineOptions(jobs=1, key_attempts=1), seed=0)
+    assert once.failure is not None and once.failure.stage == "place" and once.failure.reason == "made to fail"
+    assert len(seen) == 1 and once.phases == []
