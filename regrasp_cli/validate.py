@@ -17,6 +17,10 @@ names (refusing stale files by their SHA-256) and re-checks the motion:
 * **collision**: every segment sampled finely enough that no joint moves more than
   ``resolution`` and no robot point more than ``cartesian_step`` between samples (the
   bound of :mod:`roadmap.local`), against the robot itself, the obstacles and the object.
+  Where every joint carried by the holding hand's grasp-frame joint (its fingers) keeps
+  its value through a phase, the held object and the links of that hand keep their
+  relative pose: those pairs are checked once, at the phase's first waypoint, not at every
+  sample (they are the costliest: the object's mesh against fingertips in contact).
 
 Malformed, incomplete or stale input raises :class:`~regrasp_cli.errors.InputError`;
 everything else wrong with the plan is an :class:`Issue` of the returned report.
@@ -413,11 +417,30 @@ def _collision(phase: Phase, world: CollisionWorld, q: np.ndarray, waypoint: int
     return Issue(phase.name, waypoint, "collision", f"{where}: {names or 'collision'}")
 
 
-def phase_world(inputs: Inputs, phase: Phase, carry: Carry) -> CollisionWorld:
-    """Robot, obstacles and the object, static or held, for ``phase``."""
+def phase_world(inputs: Inputs, phase: Phase, carry: Carry, pair_filter=None) -> CollisionWorld:
+    """Robot, obstacles and the object, static or held, for ``phase`` (the pairs
+    ``pair_filter(a, b)`` accepts, see :class:`CollisionWorld`)."""
     touching = tuple(dict.fromkeys(phase.holding + phase.touching))
     obj = ObjectPlacement(inputs.mesh, carry.X_PO, carry.hand, touching)
-    return CollisionWorld(inputs.robot, inputs.obstacles, inputs.disabled, obj, inputs.options)
+    return CollisionWorld(inputs.robot, inputs.obstacles, inputs.disabled, obj, inputs.options,
+                          pair_filter=pair_filter)
+
+
+def rigid_links(robot: Robot, phase: Phase, carry: Carry) -> frozenset[str]:
+    """Links whose pose relative to the held object is the same at every point of the
+    phase: those carried by the holding hand's grasp-frame joint, when every joint they
+    hang from below it keeps its value at every waypoint (segments are straight, so it
+    keeps it between them too); empty when the object is not held or a joint moves."""
+    if carry.hand is None:
+        return frozenset()
+    model = robot.model
+    j = model.frames[robot.hands[carry.hand].grasp_frame].parentJoint
+    below = [model.names[k] for k in model.subtrees[j] if k != j]
+    idx = [robot.joint_names.index(n) for n in below if n in robot.joint_names]
+    q = phase.waypoints
+    if idx and np.abs(q[:, idx] - q[0, idx]).max() > FINGER_TOL:
+        return frozenset()
+    return frozenset(f.name for f in model.frames if f.parentJoint in model.subtrees[j])
 
 
 # ------------------------------------------------------------------ grasp checks
@@ -514,8 +537,18 @@ def _phase_collisions(k: int) -> tuple[list[Issue], int, float]:
     reach = j["reach"]
     if carry.hand is not None:  # the held object reaches farther than the robot
         reach = held_reach(inputs.robot, reach, carry.hand, np.asarray(inputs.mesh.vertices), carry.X_PO)
-    found, n = collision_issues(phase, phase_world(inputs, phase, carry), reach, j["resolution"],
+    rigid = rigid_links(inputs.robot, phase, carry)
+
+    def moving(a: str, b: str) -> bool:  # not the object against a link rigid with it
+        return not ("object" in (a, b) and (a in rigid or b in rigid))
+
+    found, n = collision_issues(phase, phase_world(inputs, phase, carry, moving), reach, j["resolution"],
                                 j["cartesian_step"])
+    if rigid:
+        once = phase_world(inputs, phase, carry, lambda a, b: not moving(a, b))
+        if not once.is_free(phase.waypoints[0]):
+            found.insert(0, _collision(phase, once, phase.waypoints[0], 0,
+                                       "the held object against its hand (the same all phase)"))
     return found, n, perf_counter() - t0
 
 

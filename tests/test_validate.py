@@ -412,3 +412,45 @@ def test_failed_plan_gives_one_status_issue(plan_dir, base_plan):
     assert len(report.issues) == 1
     assert report.issues[0].check == "status" and "no exchange configuration" in report.issues[0].message
     assert not report.valid
+
+
+# ------------------------------------------------------------------ the held object and its hand
+
+
+def test_rigid_links_only_while_the_holding_fingers_keep_their_values(base_plan, problem):
+    from regrasp_cli.validate import Carry, rigid_links
+
+    robot = problem.robot
+    carry = _phase(base_plan, "carry")
+    held_by = Carry(HAND, np.eye(4))
+    rigid = rigid_links(robot, carry, held_by)
+    h = robot.hands[HAND]
+    tips = {robot.model.frames[f].name for f in h.tip_frames}
+    assert "r_palm" in rigid and tips <= rigid
+    assert not any(n.startswith("l_") for n in rigid) and "r_arm_link5" not in rigid
+    assert rigid_links(robot, carry, Carry(None, np.eye(4))) == frozenset()  # not held
+    q = carry.waypoints.copy()
+    q[1, h.idx[1]] += 1e-4  # a finger moves: nothing is rigid with the object
+    assert rigid_links(robot, replace(carry, waypoints=q), held_by) == frozenset()
+
+
+def test_fingers_closed_into_the_held_object_are_a_collision_once(plan_dir, base_plan, problem):
+    """The fingers closed 0.4 rad further than the grasp, from the end of closing through
+    the carry: the fingers cross the object.  The carry's constant hand-object pairs are
+    checked once, at its first waypoint, and reported there (besides the fingers' grasp
+    values, an attachment issue)."""
+    h = problem.robot.hands[HAND]
+    deeper = {"close_right": [1], "carry": [0, 1, 2], "open_right": [0]}
+    phases = []
+    for p in base_plan.phases:
+        wp = p.waypoints.copy()
+        for i in deeper.get(p.name, []):
+            wp[i, h.idx] = np.minimum(wp[i, h.idx] + 0.4, problem.robot.upper[h.idx])
+        phases.append((p.name, p.holding, p.touching, wp))
+    v, a = np.asarray(base_plan.limits["velocity"]), np.asarray(base_plan.limits["acceleration"])
+    report = validate_plan(_write(plan_dir, replace(base_plan, phases=_phases(phases, v, a))))
+    carry = [i for i in report.issues if i.phase == "carry"]
+    assert ("collision", 0) in {(i.check, i.waypoint) for i in carry}, [str(i) for i in report.issues]
+    hit = next(i for i in carry if i.check == "collision")
+    assert "held object against its hand" in hit.message and "object" in hit.message
+    assert ("attachment", "carry") in {(i.check, i.phase) for i in report.issues}
