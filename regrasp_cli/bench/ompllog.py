@@ -22,6 +22,7 @@ from __future__ import annotations
 import platform
 
 from regrasp_cli.bench.aggregate import QUERIES, ordered, select
+from regrasp_cli.bench.suite import DEFAULT_ITERATIONS
 
 # the outcome of a run: solved, or the stage where it stopped (planner stages, the
 # validator, the runner's budget and crash records)
@@ -60,8 +61,9 @@ def experiment_log(records: list[dict], meta: dict, scene: str) -> str:
     m, suite = meta["machine"], meta["suite"]
     rs = select(records, scene)
     planners = ordered(r["planner"] for r in rs)
+    iterations = suite.get("iterations", DEFAULT_ITERATIONS)
     setup = [f"regrasp bench, suite {suite['name']} ({suite.get('file', '?')}), scene {scene}",
-             f"budget {suite['budget_s']:g} s per run, {suite.get('iterations', 3000)} RRT-Connect iterations per "
+             f"budget {suite['budget_s']:g} s per run, {iterations} RRT-Connect iterations per "
              f"query, roadmap {suite.get('roadmap_nodes', 50)} nodes per arm, joblib {meta.get('backend', '?')} "
              f"x {meta.get('jobs', '?')}",
              "libraries: " + ", ".join(f"{k} {v}" for k, v in m.get("libraries", {}).items())]
@@ -83,7 +85,7 @@ def experiment_log(records: list[dict], meta: dict, scene: str) -> str:
     for planner in planners:
         runs = sorted(select(rs, planner=planner), key=lambda r: r["seed"])
         L += [planner, "2 common properties",
-              f"iterations INTEGER = {suite.get('iterations', 3000)}",
+              f"iterations INTEGER = {iterations}",
               f"budget REAL = {suite['budget_s']:g}",
               f"{len(COLUMNS)} properties for each run"]
         L += [f"{name} {kind}" for name, kind, _ in COLUMNS]

@@ -9,6 +9,7 @@ import math
 
 from regrasp_cli.bench.aggregate import (PLOT_PHASES, QUERIES, TABLE_ONE_COLUMNS, ordered, phase_medians,
                                          seed_ratios, select, spread, summarise, table_one)
+from regrasp_cli.bench.suite import DEFAULT_ITERATIONS
 
 SUMMARY_COLUMNS = ("scene", "planner", "solved", "success", "total median (s)", "total IQR (s)",
                    "planner median (s)", "validate median (s)", "path length median", "peak RSS (MB)",
@@ -196,7 +197,8 @@ def docs_block(records: list[dict], meta: dict, reference: str = "roadmap") -> s
     L = [f"{m['date'][:10]}, {m['cpu']}, {m['cores']} cores, Python {m['python']}, regrasp {m['regrasp']}"
          f"{f' ({libs})' if libs else ''}; "
          f"{meta['runs']} runs of suite `{suite['name']}` ({len(suite['seeds'])} seeds, budget "
-         f"{suite['budget_s']:g} s per run, {suite.get('iterations', 3000)} RRT-Connect iterations per query), "
+         f"{suite['budget_s']:g} s per run, {suite.get('iterations', DEFAULT_ITERATIONS)} RRT-Connect iterations "
+         "per query), "
          f"{meta['jobs']} at a time ({meta['backend']}).", ""]
     L += _md(SUMMARY_COLUMNS, summary_rows(records, reference))
     rr = ratio_rows(records, reference, key="planner_s")

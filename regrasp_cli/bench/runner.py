@@ -45,7 +45,7 @@ from typing import Callable
 import numpy as np
 
 from regrasp_cli.bench.aggregate import QUERIES, STAGES
-from regrasp_cli.bench.suite import REFERENCE, Suite
+from regrasp_cli.bench.suite import DEFAULT_ITERATIONS, REFERENCE, Suite
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ class RunItem:
     budget_s: float
     roadmap_nodes: int
     grasp_target: int | None
-    iterations: int = 3000  # RRT-Connect iterations per query (every planner)
+    iterations: int = DEFAULT_ITERATIONS  # RRT-Connect iterations per query (every planner)
 
 
 def scene_labels(suite: Suite) -> dict[Path, str]:

@@ -45,9 +45,11 @@ def test_the_block_is_rewritten_from_the_records(tmp_path):
     r = run(results(tmp_path), "--docs", d)
     assert r.returncode == 0, r.stderr
     text = (d / "BENCHMARKS.md").read_text()
-    assert text.startswith("# Benchmarks\n\nbefore\n<!-- bench:tiny -->\n") and text.endswith("<!-- /bench:tiny -->\nafter\n")
+    assert text.startswith("# Benchmarks\n\nbefore\n<!-- bench:tiny -->\n")
+    assert text.endswith("<!-- /bench:tiny -->\nafter\n")
     assert "old table" not in text
-    assert "Test CPU, 2 cores" in text and "regrasp 0.1.0 (pin 4.1.0, ompl 2.0.1)" in text and "3000 RRT-Connect iterations per query" in text
+    assert "Test CPU, 2 cores" in text and "regrasp 0.1.0 (pin 4.1.0, ompl 2.0.1)" in text
+    assert "3000 RRT-Connect iterations per query" in text
     assert "| desk | roadmap | 4/6 | 67 % |" in text  # aggregated again from runs.jsonl
     assert "| desk | rrt-connect | 2 | 3.50x |" in text  # planner time ratio: total / 2 in the records
     assert "## Next to the paper: desk" in text and "| the four queries, roadmap | 11.6 s |" in text
