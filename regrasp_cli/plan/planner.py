@@ -306,16 +306,14 @@ def _run(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     # the ends of the task first: nothing else matters if the robot starts in collision
     for q, X, stage, what in ((problem.q_start, task.X_WO_start, "grasp", "start"),
                               (problem.q_goal, task.X_WO_goal, "rest", "goal")):
-        world = scratch.world(X)
-        if not world.is_free(q):
-            pairs = ", ".join("-".join(p) for p in world.colliding_pairs(q)[:3])
-            raise PlanningFailed(stage, f"the robot's {what} configuration is in collision ({pairs})")
-        world = scratch.certified(world)
-        if not world.is_free(q):
-            pairs = ", ".join("-".join(p) for p in world.colliding_pairs(q)[:3])
-            raise PlanningFailed(stage, f"the robot's {what} configuration is closer than "
-                                        f"{1000 * scratch.local.margin:g} mm to an obstacle or itself ({pairs}); "
-                                        f"the query checks need that clearance")
+        plain = scratch.world(X)
+        for world, fault in ((plain, "is in collision"),
+                             (scratch.certified(plain), f"is closer than {1000 * scratch.local.margin:g} mm to an "
+                                                        "obstacle or itself")):
+            if not world.is_free(q):
+                pairs = ", ".join("-".join(p) for p in world.colliding_pairs(q)[:3])
+                need = "" if world is plain else "; the query checks need that clearance"
+                raise PlanningFailed(stage, f"the robot's {what} configuration {fault} ({pairs}){need}")
 
     # ---------------------------------------------------------------- double grasps
     env = static_geometry(problem.spec.obstacles)
