@@ -44,6 +44,13 @@ def main(ctx: click.Context, debug: bool, cache_dir: Path) -> None:
         warnings.showwarning = _warning_line
 
 
+def _roadmap_nodes() -> int:
+    """The roadmap's default size, from its options (imported when a command needs it)."""
+    from regrasp_cli.roadmap.build import RoadmapOptions
+
+    return RoadmapOptions.nodes
+
+
 def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
     click.echo(f"warning: {message}", err=True)
 
@@ -54,7 +61,7 @@ def _warning_line(message, category, filename, lineno, file=None, line=None) -> 
 @click.pass_context
 def info(ctx: click.Context, scene: Path, seed: int | None) -> None:
     """Summarise a scene: robot, collision pairs, obstacles, object, reachability."""
-    from regrasp_cli.report import print_info
+    from regrasp_cli.commands.report import print_info
 
     print_info(scene, ctx.obj["cache_dir"], seed)
 
@@ -79,7 +86,7 @@ def grasps() -> None:
 def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, jobs: int,
                  positions: int | None, orientations: int | None, target: int | None, weights: str | None) -> None:
     """Compute the grasp list of each hand and store it in the cache (HDF5)."""
-    from regrasp_cli.report import run_grasps_build
+    from regrasp_cli.commands.report import run_grasps_build
 
     run_grasps_build(scene, ctx.obj["cache_dir"], hand, seed, jobs, positions, orientations, target, weights)
 
@@ -95,13 +102,13 @@ def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, j
 @click.pass_context
 def grasps_show(ctx: click.Context, file: Path, best: int, scene: Path | None, png: Path | None) -> None:
     """Print the stored provenance and the best grasps of a grasp list; draw them with --png."""
-    from regrasp_cli.report import show_grasps
-    from regrasp_cli.show.command import check_grasps_png
+    from regrasp_cli.commands.report import show_grasps
+    from regrasp_cli.commands.show import check_grasps_png
 
     check_grasps_png(png, scene, best)
     show_grasps(file, best, scene, ctx.obj["cache_dir"])
     if png is not None:
-        from regrasp_cli.show.command import run_grasps_png
+        from regrasp_cli.commands.show import run_grasps_png
 
         click.echo(f"png: {run_grasps_png(file, best, scene, ctx.obj['cache_dir'], png)}")
 
@@ -113,14 +120,15 @@ def roadmap() -> None:
 
 @roadmap.command("build")
 @click.argument("scene", type=click.Path(path_type=Path))
-@click.option("--nodes", type=int, default=50, show_default=True, help="Nodes of each elementary roadmap.")
+@click.option("--nodes", type=int, default=lambda: _roadmap_nodes(), show_default=True,
+              help="Nodes of each elementary roadmap.")
 @click.option("--tree", is_flag=True, help="Super Graph edges only between different components (a forest).")
 @click.option("--seed", type=int, default=None, help="Random seed (default: the scene's planning.seed).")
 @click.option("--jobs", type=int, default=2, show_default=True, help="Parallel worker processes.")
 @click.pass_context
 def roadmap_build(ctx: click.Context, scene: Path, nodes: int, tree: bool, seed: int | None, jobs: int) -> None:
     """Build the elementary roadmaps and the Super Graph; store them in the cache (HDF5)."""
-    from regrasp_cli.report import run_roadmap_build
+    from regrasp_cli.commands.report import run_roadmap_build
 
     run_roadmap_build(scene, ctx.obj["cache_dir"], nodes, tree, seed, jobs)
 
@@ -132,7 +140,7 @@ def roadmap_build(ctx: click.Context, scene: Path, nodes: int, tree: bool, seed:
 @click.pass_context
 def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
     """Print the stored provenance and summary of a roadmap."""
-    from regrasp_cli.report import show_roadmap
+    from regrasp_cli.commands.report import show_roadmap
 
     show_roadmap(file, scene, ctx.obj["cache_dir"])
 
@@ -151,7 +159,7 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
 @click.option("--no-timings", is_flag=True,
               help="Leave wall-clock times out of the plan, so that the same seed writes the same bytes.")
 @click.option("--no-check", is_flag=True, help="Skip the independent validation of the written plan.")
-@click.option("--roadmap-nodes", type=int, default=50, show_default=True,
+@click.option("--roadmap-nodes", type=int, default=lambda: _roadmap_nodes(), show_default=True,
               help="Nodes per elementary roadmap of the roadmap to use (built if missing).")
 @click.option("--grasp-target", type=int, default=None,
               help="Target size of the grasp lists to use (built if missing; default 120).")
@@ -161,7 +169,7 @@ def plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, planne
     """Plan the pick, hand-over and place of the scene's object; write the plan JSON.
 
     Exits 0 when solved, 1 with the failing stage and reason when not."""
-    from regrasp_cli.plan.command import run_plan
+    from regrasp_cli.commands.plan import run_plan
 
     run_plan(scene, ctx.obj["cache_dir"], output, seed, planner, not no_build, jobs, not no_timings, not no_check,
              roadmap_nodes, grasp_target)
@@ -178,7 +186,8 @@ def validate(plan_file: Path, resolution: float, cartesian_step: float) -> None:
     from rich.console import Console
 
     from regrasp_cli.errors import InputError
-    from regrasp_cli.validate import print_validation, validate_plan
+    from regrasp_cli.commands.validate import print_validation
+    from regrasp_cli.validate import validate_plan
 
     for value, name in ((resolution, "--resolution"), (cartesian_step, "--cartesian-step")):
         if not value > 0:
@@ -201,7 +210,7 @@ def validate(plan_file: Path, resolution: float, cartesian_step: float) -> None:
               help="Draw the robot's visual geometry, or the collision geometry the planner checked.")
 def show(plan_file: Path, html_file: Path | None, png_dir: Path | None, fps: int, size: str, geometry: str) -> None:
     """Look at a plan: an animated 3D page and key-frame pictures.  Give --html, --png or both."""
-    from regrasp_cli.show.command import run_show
+    from regrasp_cli.commands.show import run_show
 
     run_show(plan_file, html_file, png_dir, fps, size, geometry)
 
@@ -231,7 +240,7 @@ def bench(ctx: click.Context, suite_file: Path, output: Path | None, jobs: int, 
     with a time budget; write runs.jsonl, summary.md and times.png and print the tables.
 
     A failed run (no plan, invalid plan, crash, over budget) is recorded with its reason."""
-    from regrasp_cli.bench.command import run_bench
+    from regrasp_cli.commands.bench import run_bench
 
     run_bench(suite_file, ctx.obj["cache_dir"], output, jobs, seeds, planners, budget_s,
               backend=backend, scheduler=scheduler, iterations=iterations)

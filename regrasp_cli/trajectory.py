@@ -1,20 +1,30 @@
-"""The plan JSON (``format: regrasp.plan/1``): what `regrasp plan` writes and `regrasp
-validate` reads.
+"""The plan JSON (``format: regrasp.plan/2``): what `regrasp plan` writes and `regrasp
+validate` and `regrasp show` read.
 
 A plan is self-contained for an independent checker: besides the motion it records the
 URDF and the object mesh it was planned for (paths and SHA-256), the obstacles as
 resolved, the self-collision pairs that were disabled, the collision tolerances, the
-grasps (hand pose in the object frame, finger values, contacts) and the object's start,
-exchange and goal poses.  The motion is a list of phases; each phase has the hands that
-hold the object during all of it (``holding``; the object is static in the world when
-empty) and the hands whose fingertips may touch it (``touching``), its waypoints (full
-configurations in the order of ``joint_names``, joined by straight joint-space segments)
-and their times (s from the plan start; stop at every waypoint, :mod:`plan.timing`).  The
-first waypoint of a phase equals the last of the previous phase.
+grasps it uses (any number per hand, each with an ``id``: hand pose in the object frame,
+finger values, contacts) and the ``placements`` where the object rests (``start``,
+``goal``, and any intermediate one).
+
+The motion is a list of phases, each a transition between manipulation modes
+(:mod:`regrasp_cli.manip.modes`): ``kind`` (transit, transfer, grasp, release, handover,
+inhand-transfer, inhand-regrasp), ``holding`` (hand -> grasp id: the hands that hold the
+object rigidly during all of it), ``touching`` (the hands whose fingers close on, open
+off or move on the object), ``placement`` (the placement id where the object rests, for
+the kinds in which it rests, else null), its waypoints (full configurations in the order
+of ``joint_names``, joined by straight joint-space segments) and their times (s from the
+plan start; stop at every waypoint, :mod:`regrasp_cli.motion.timing`), and optionally
+per-waypoint ``object_poses`` (4x4 in W) and ``contacts`` (per waypoint, a list of
+``{finger, point, normal}`` in the object frame) for motions where the object moves
+relative to the palm.  The first waypoint of a phase equals the last of the previous
+phase.  ``name`` is a label for people; no program reads meaning from it.
 
 Poses are 4x4 nested lists (metres), configurations lists of floats in the units of the
 joints (rad or m).  Floats are written with ``repr`` precision and keys in a fixed order,
-so that the same plan gives the same bytes.
+so that the same plan gives the same bytes.  Plans of format ``regrasp.plan/1`` (before
+manipulation modes) are refused with a line saying to plan again.
 """
 
 from __future__ import annotations
@@ -28,30 +38,42 @@ from typing import Any
 import numpy as np
 
 from regrasp_cli.errors import InputError
+from regrasp_cli.manip.modes import KIND_NAMES, Kind
 from regrasp_cli.store import atomic_write_text
 
-FORMAT = "regrasp.plan/1"
-PHASES = ("grasp", "close_right", "carry", "close_left", "open_right", "place", "open_left", "rest")
+FORMAT = "regrasp.plan/2"
+OLD_FORMATS = ("regrasp.plan/1",)
 
 
 @dataclass(frozen=True)
 class PlanGrasp:
+    id: str  # unique in the plan; phases name it in ``holding``
     hand: str
-    id: int  # index in the cached grasp list (best first)
     X_OG: np.ndarray  # (4, 4) grasp frame G in the object frame O ("hand_in_object")
     finger_joints: tuple[str, ...]
     finger_values: np.ndarray  # (n,) closed on the object
     contacts: tuple[dict, ...]  # {finger, point (3,), normal (3,)} in frame O, fingers in contact
     quality: float  # the grasp list's total score
+    list_index: int | None = None  # index in the cached grasp list it came from
+
+
+@dataclass(frozen=True)
+class Placement:
+    id: str  # "start", "goal", or an intermediate placement's name
+    X_WO: np.ndarray  # (4, 4) object pose in W where it rests
 
 
 @dataclass(frozen=True)
 class Phase:
-    name: str
-    holding: tuple[str, ...]  # hands holding the object during the whole phase
-    touching: tuple[str, ...]  # further hands whose fingertips may touch it
+    name: str  # a label for people
+    kind: Kind
+    holding: dict[str, str]  # hand -> grasp id, hands holding the object during the whole phase
+    touching: tuple[str, ...]  # hands whose fingers move on the object
+    placement: str | None  # where the object rests during the phase (kinds where it rests)
     waypoints: np.ndarray  # (k, nq)
     times: np.ndarray  # (k,) s from the plan start
+    object_poses: np.ndarray | None = None  # (k, 4, 4) X_WO per waypoint, optional
+    contacts: tuple[tuple[dict, ...], ...] | None = None  # per waypoint {finger, point, normal} in O
 
 
 @dataclass(frozen=True)
@@ -66,14 +88,18 @@ class Plan:
     obstacles: tuple[dict, ...]  # {"name", "shape", "size", "pose" (4x4), "mesh"}
     collision: dict  # {"contact_tolerance", "support_tolerance", "disabled_pairs"}
     grasps: tuple[PlanGrasp, ...] = ()
-    object_poses: dict = field(default_factory=dict)  # start, exchange, goal: (4, 4)
+    placements: tuple[Placement, ...] = ()
     phases: tuple[Phase, ...] = ()
     stats: dict = field(default_factory=dict)
     seed: int = 0
     planner: str = "roadmap"
+    task: str = ""
 
-    def grasp(self, hand: str) -> PlanGrasp | None:
-        return next((g for g in self.grasps if g.hand == hand), None)
+    def grasp(self, gid: str) -> PlanGrasp | None:
+        return next((g for g in self.grasps if g.id == gid), None)
+
+    def placement(self, pid: str) -> Placement | None:
+        return next((p for p in self.placements if p.id == pid), None)
 
     @property
     def duration(self) -> float:
@@ -91,6 +117,8 @@ def _num(x: Any) -> Any:
         return [_num(v) for v in x]
     if isinstance(x, dict):
         return {k: _num(v) for k, v in x.items()}
+    if isinstance(x, Kind):
+        return x.value
     if isinstance(x, (np.floating, float)):
         v = float(x)
         if not math.isfinite(v):
@@ -103,12 +131,23 @@ def _num(x: Any) -> Any:
     return x
 
 
+def _phase_dict(p: Phase) -> dict:
+    d = {"name": p.name, "kind": p.kind.value, "holding": dict(p.holding), "touching": list(p.touching),
+         "placement": p.placement, "waypoints": p.waypoints, "times": p.times}
+    if p.object_poses is not None:
+        d["object_poses"] = p.object_poses
+    if p.contacts is not None:
+        d["contacts"] = [list(c) for c in p.contacts]
+    return d
+
+
 def plan_to_dict(plan: Plan) -> dict:
     return _num({
         "format": FORMAT,
         "status": plan.status,
         "failure": plan.failure,
         "planner": plan.planner,
+        "task": plan.task,
         "seed": plan.seed,
         "scene": plan.scene,
         "robot": plan.robot,
@@ -117,12 +156,11 @@ def plan_to_dict(plan: Plan) -> dict:
         "object": plan.object,
         "obstacles": list(plan.obstacles),
         "collision": plan.collision,
-        "grasps": [{"hand": g.hand, "id": g.id, "hand_in_object": g.X_OG, "finger_joints": list(g.finger_joints),
-                    "finger_values": g.finger_values, "contacts": list(g.contacts), "quality": g.quality}
-                   for g in plan.grasps],
-        "object_poses": plan.object_poses,
-        "phases": [{"name": p.name, "holding": list(p.holding), "touching": list(p.touching),
-                    "waypoints": p.waypoints, "times": p.times} for p in plan.phases],
+        "grasps": [{"id": g.id, "hand": g.hand, "list_index": g.list_index, "hand_in_object": g.X_OG,
+                    "finger_joints": list(g.finger_joints), "finger_values": g.finger_values,
+                    "contacts": list(g.contacts), "quality": g.quality} for g in plan.grasps],
+        "placements": [{"id": p.id, "pose": p.X_WO} for p in plan.placements],
+        "phases": [_phase_dict(p) for p in plan.phases],
         "stats": plan.stats,
     })
 
@@ -150,8 +188,9 @@ class _Reader:
         if not isinstance(d, dict) or key not in d:
             raise self.error(f"{where}{key}", "missing")
         v = d[key]
-        if not isinstance(v, kind) or isinstance(v, bool) and bool not in (kind if isinstance(kind, tuple) else (kind,)):
-            names = "/".join(k.__name__ for k in (kind if isinstance(kind, tuple) else (kind,)))
+        kinds = kind if isinstance(kind, tuple) else (kind,)
+        if not isinstance(v, kinds) or isinstance(v, bool) and bool not in kinds:
+            names = "/".join("null" if k is type(None) else k.__name__ for k in kinds)
             raise self.error(f"{where}{key}", f"expected {names}, found {type(v).__name__}")
         return v
 
@@ -167,38 +206,133 @@ class _Reader:
         return a
 
 
+def _grasps(r: _Reader, d: dict) -> tuple[PlanGrasp, ...]:
+    out, seen = [], set()
+    for i, g in enumerate(r.get(d, "grasps", "", list)):
+        w = f"grasps[{i}]."
+        gid = r.get(g, "id", w, str)
+        if gid in seen:
+            raise r.error(w + "id", f"grasp id {gid!r} is used twice; ids must be unique")
+        seen.add(gid)
+        fj = tuple(r.get(g, "finger_joints", w, list))
+        index = g.get("list_index")
+        out.append(PlanGrasp(gid, r.get(g, "hand", w, str),
+                             r.array(r.get(g, "hand_in_object", w, list), w + "hand_in_object", (4, 4)),
+                             fj, r.array(r.get(g, "finger_values", w, list), w + "finger_values", (len(fj),)),
+                             tuple(r.get(g, "contacts", w, list)), float(r.get(g, "quality", w, (int, float))),
+                             index if isinstance(index, int) and not isinstance(index, bool) else None))
+    return tuple(out)
+
+
+def _placements(r: _Reader, d: dict) -> tuple[Placement, ...]:
+    out = []
+    for i, p in enumerate(r.get(d, "placements", "", list)):
+        w = f"placements[{i}]."
+        pid = r.get(p, "id", w, str)
+        if any(q.id == pid for q in out):
+            raise r.error(w + "id", f"placement id {pid!r} is used twice; ids must be unique")
+        out.append(Placement(pid, r.array(r.get(p, "pose", w, list), w + "pose", (4, 4))))
+    for need in ("start", "goal"):
+        if not any(p.id == need for p in out):
+            raise r.error("placements", f"expected a placement with id {need!r} (the object's {need} pose)")
+    return tuple(out)
+
+
+def _holding(r: _Reader, p: dict, w: str, grasps: dict[str, PlanGrasp]) -> dict[str, str]:
+    holding = r.get(p, "holding", w, dict)
+    for hand, gid in holding.items():
+        if not isinstance(gid, str):
+            raise r.error(f"{w}holding.{hand}", f"expected a grasp id (string), found {type(gid).__name__}")
+        if gid not in grasps:
+            known = ", ".join(repr(k) for k in grasps) or "none"
+            raise r.error(f"{w}holding.{hand}", f"grasp id {gid!r} is not in grasps[] (ids: {known})")
+        if grasps[gid].hand != hand:
+            raise r.error(f"{w}holding.{hand}", f"grasp {gid!r} is a grasp of the {grasps[gid].hand} hand, "
+                                                f"not of the {hand} hand")
+    return dict(holding)
+
+
+def _kind_rules(r: _Reader, w: str, kind: Kind, holding: dict, touching: tuple, placement: str | None,
+                placements: tuple[Placement, ...]) -> None:
+    """What a phase's kind says about who holds, who touches and where the object rests."""
+    if kind.object_rests:
+        if placement is None:
+            raise r.error(w + "placement", f"a {kind.value} phase has the object resting: expected the id of "
+                                           "one of placements[]")
+        if holding:
+            raise r.error(w + "holding", f"the object rests at placement {placement!r} in a {kind.value} phase, "
+                                         f"so no hand can hold it; found {', '.join(holding)}")
+    elif placement is not None:
+        raise r.error(w + "placement", f"the object is not resting in a {kind.value} phase; expected null, "
+                                       f"found {placement!r}")
+    if placement is not None and not any(p.id == placement for p in placements):
+        raise r.error(w + "placement", f"placement id {placement!r} is not in placements[] "
+                                       f"(ids: {', '.join(repr(p.id) for p in placements)})")
+    if kind in (Kind.TRANSFER, Kind.HANDOVER) and not holding:
+        raise r.error(w + "holding", f"a {kind.value} phase needs a hand holding the object; found none")
+    if kind.fingers_on_object and not touching:
+        raise r.error(w + "touching", f"a {kind.value} phase moves some hand's fingers on the object; "
+                                      "expected at least one hand")
+    if kind in (Kind.TRANSIT, Kind.TRANSFER) and touching:
+        raise r.error(w + "touching", f"no fingers move on the object in a {kind.value} phase; expected [], "
+                                      f"found {list(touching)}")
+    both = set(holding) & set(touching)
+    if both:
+        raise r.error(w + "touching", f"the {', '.join(sorted(both))} hand both holds and moves its fingers")
+
+
+def _phase(r: _Reader, p: Any, i: int, nq: int, grasps: dict[str, PlanGrasp],
+           placements: tuple[Placement, ...]) -> Phase:
+    w = f"phases[{i}]."
+    kind_name = r.get(p, "kind", w, str)
+    if kind_name not in KIND_NAMES:
+        raise r.error(w + "kind", f"expected one of {', '.join(KIND_NAMES)}, found {kind_name!r}")
+    kind = Kind(kind_name)
+    holding = _holding(r, p, w, grasps)
+    touching = tuple(r.get(p, "touching", w, list))
+    placement = r.get(p, "placement", w, (str, type(None)))
+    _kind_rules(r, w, kind, holding, touching, placement, placements)
+    wp = r.array(r.get(p, "waypoints", w, list), w + "waypoints", (None, nq))
+    if not len(wp):
+        raise r.error(w + "waypoints", "expected at least one waypoint")
+    times = r.array(r.get(p, "times", w, list), w + "times", (len(wp),))
+    poses = None
+    if p.get("object_poses") is not None:
+        poses = r.array(p["object_poses"], w + "object_poses", (len(wp), 4, 4))
+    elif kind.inhand:
+        raise r.error(w + "object_poses", f"a {kind.value} phase moves the object in the hand: expected its "
+                                          "pose at every waypoint")
+    contacts = None
+    if p.get("contacts") is not None:
+        c = r.get(p, "contacts", w, list)
+        if len(c) != len(wp) or not all(isinstance(x, list) for x in c):
+            raise r.error(w + "contacts", f"expected one list of contacts per waypoint ({len(wp)})")
+        contacts = tuple(tuple(x) for x in c)
+    return Phase(r.get(p, "name", w, str), kind, holding, touching, placement, wp, times, poses, contacts)
+
+
 def plan_from_dict(d: Any, file: Path) -> Plan:
     r = _Reader(file)
     if not isinstance(d, dict):
         raise r.error("", "expected a JSON object")
     fmt = r.get(d, "format", "", str)
+    if fmt in OLD_FORMATS:
+        raise r.error("format", f"{fmt!r} was written by an earlier regrasp; this one reads {FORMAT!r}: plan "
+                                "again with `regrasp plan SCENE`")
     if fmt != FORMAT:
         raise r.error("format", f"expected '{FORMAT}', found {fmt!r}")
     status = r.get(d, "status", "", str)
     if status not in ("solved", "failed"):
         raise r.error("status", f"expected 'solved' or 'failed', found {status!r}")
     names = tuple(r.get(d, "joint_names", "", list))
-    nq = len(names)
-    grasps = []
-    for i, g in enumerate(r.get(d, "grasps", "", list)):
-        w = f"grasps[{i}]."
-        fj = tuple(r.get(g, "finger_joints", w, list))
-        grasps.append(PlanGrasp(r.get(g, "hand", w, str), r.get(g, "id", w, int),
-                                r.array(r.get(g, "hand_in_object", w, list), w + "hand_in_object", (4, 4)),
-                                fj, r.array(r.get(g, "finger_values", w, list), w + "finger_values", (len(fj),)),
-                                tuple(r.get(g, "contacts", w, list)), float(r.get(g, "quality", w, (int, float)))))
-    phases = []
-    for i, p in enumerate(r.get(d, "phases", "", list)):
-        w = f"phases[{i}]."
-        wp = r.array(r.get(p, "waypoints", w, list), w + "waypoints", (None, nq))
-        times = r.array(r.get(p, "times", w, list), w + "times", (len(wp),))
-        phases.append(Phase(r.get(p, "name", w, str), tuple(r.get(p, "holding", w, list)),
-                            tuple(r.get(p, "touching", w, list)), wp, times))
-    poses = {k: r.array(v, f"object_poses.{k}", (4, 4)) for k, v in r.get(d, "object_poses", "", dict).items()}
+    grasps = _grasps(r, d)
+    placements = _placements(r, d)
+    by_id = {g.id: g for g in grasps}
+    phases = tuple(_phase(r, p, i, len(names), by_id, placements) for i, p in enumerate(r.get(d, "phases", "", list)))
     return Plan(status, d.get("failure"), r.get(d, "scene", "", dict), r.get(d, "robot", "", dict), names,
                 r.get(d, "limits", "", dict), r.get(d, "object", "", dict), tuple(r.get(d, "obstacles", "", list)),
-                r.get(d, "collision", "", dict), tuple(grasps), poses, tuple(phases), d.get("stats", {}),
-                int(d.get("seed", 0)), str(d.get("planner", "roadmap")))
+                r.get(d, "collision", "", dict), grasps, placements, phases, d.get("stats", {}),
+                int(d.get("seed", 0)), str(d.get("planner", "roadmap")), str(d.get("task", "")))
 
 
 def read_plan(path: str | Path) -> Plan:

@@ -32,7 +32,7 @@ pytestmark = needs_separate_stderr
 def built(problem, cache_dir):
     """One small `grasps build` into the session cache: (result, path of the list)."""
     from regrasp_cli.grasp.build import artefact_path
-    from regrasp_cli.report import build_options
+    from regrasp_cli.artefacts import build_options
 
     result = run("--cache-dir", cache_dir, "grasps", "build", SCENE_YAML, *SMALL)
     path = artefact_path(Path(cache_dir).resolve(), problem, "right", build_options(0, None, 1, 8, 64, 0))
@@ -236,7 +236,7 @@ def test_bad_weights(cache_dir, weights):
 def test_weights_change_the_ranking_inputs(problem):
     """Other weights are other parameters: the list is another artefact (own hash)."""
     from regrasp_cli.grasp.build import provenance
-    from regrasp_cli.report import build_options
+    from regrasp_cli.artefacts import build_options
 
     a = provenance(problem, "right", build_options(0, None, 1, 8, 64, 0))
     b = provenance(problem, "right", build_options(0, None, 1, 8, 64, 0, "1,1,1,1"))

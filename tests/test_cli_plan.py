@@ -3,8 +3,9 @@ regrasp_cli.cli.main), on the default scene with small artefacts: grasp lists of
 grasps per hand and a roadmap of 12 nodes per elementary roadmap, built once into the
 session cache by the first `plan` (tests/plan/test_online.py uses the same grasp lists).
 
-A solved plan passes the independent checker and has the eight phases of a hand-over;
-the same seed writes the same bytes; tampered plans are rejected with the issue named;
+A solved plan (``regrasp.plan/2``) passes the independent checker and has the eight
+phases of a hand-over with their kinds, holdings and placements; the same seed writes the
+same bytes; tampered plans are rejected with the issue named;
 missing artefacts with --no-build and planning failures give their exit codes and one
 clear line; the RRT-Connect baseline solves the scene too.
 """
@@ -27,9 +28,25 @@ SMALL = ("--grasp-target", "20", "--roadmap-nodes", "12")
 SEED = 0  # the scene's planning.seed
 RRT_SEED = 0  # the baseline does not solve every seed with its default budget; it solves this one
 PHASES = ("grasp", "close_right", "carry", "close_left", "open_right", "place", "open_left", "rest")
-# (holding, touching) of each phase: the right hand picks, hands over to the left, which places
-ROLES = (((), ()), ((), ("right",)), (("right",), ()), (("right",), ("left",)), (("left",), ("right",)),
-         (("left",), ()), ((), ("left",)), ((), ()))
+# (kind, holding hands, touching, placement) of each phase: the right hand picks at the start
+# placement, hands over to the left, which places at the goal placement
+ROLES = (("transit", (), (), "start"), ("grasp", (), ("right",), "start"), ("transfer", ("right",), (), None),
+         ("handover", ("right",), ("left",), None), ("handover", ("left",), ("right",), None),
+         ("transfer", ("left",), (), None), ("release", (), ("left",), "goal"), ("transit", (), (), "goal"))
+
+
+def roles(p) -> tuple:
+    return tuple((ph.kind.value, tuple(ph.holding), ph.touching, ph.placement) for ph in p.phases)
+
+
+def assert_holds_its_grasps(p) -> None:
+    """Each hand holds with one grasp of its own, its id ``hand-<index in the cached list>``."""
+    assert [g.hand for g in p.grasps] == ["right", "left"]
+    for g in p.grasps:
+        assert g.id == f"{g.hand}-{g.list_index}"
+    for ph in p.phases:
+        for hand, gid in ph.holding.items():
+            assert gid == next(g.id for g in p.grasps if g.hand == hand), ph.name
 
 pytestmark = needs_separate_stderr
 
@@ -74,12 +91,14 @@ def test_plan_solves_the_default_scene(solved, problem):
     p = read_plan(out)
     assert (p.status, p.failure, p.planner, p.seed) == ("solved", None, "roadmap", SEED)
     assert tuple(ph.name for ph in p.phases) == PHASES
-    assert tuple((ph.holding, ph.touching) for ph in p.phases) == ROLES
+    assert roles(p) == ROLES
+    assert_holds_its_grasps(p)
     assert np.array_equal(p.phases[0].waypoints[0], problem.q_start)  # rest
     assert np.array_equal(p.phases[-1].waypoints[-1], problem.q_goal)  # rest
-    assert np.array_equal(p.object_poses["start"], problem.spec.task.X_WO_start)
-    assert np.array_equal(p.object_poses["goal"], problem.spec.task.X_WO_goal)
-    assert [g.hand for g in p.grasps] == ["right", "left"]
+    assert [pl.id for pl in p.placements] == ["start", "goal"]
+    assert np.array_equal(p.placement("start").X_WO, problem.spec.task.X_WO_start)
+    assert np.array_equal(p.placement("goal").X_WO, problem.spec.task.X_WO_goal)
+    assert json.loads(out.read_text())["format"] == "regrasp.plan/2"
 
 
 def test_validate_accepts_the_solved_plan(solved):
@@ -183,10 +202,54 @@ def test_validate_rejects_a_contact_off_the_surface(solved):
 
     out = validate_rejects(tampered(src, "off_surface.json", change))
     g = d0["grasps"][0]
-    m = re.search(rf"^grasp: grasp {g['hand']} #{g['id']}: {contact['finger']} contact ([\d.]+) mm off the object "
-                  r"surface", out, re.M)
+    m = re.search(rf"^grasp: grasp {g['id']} \({g['hand']} hand\): {contact['finger']} contact ([\d.]+) mm off the "
+                  r"object surface", out, re.M)
     assert m, out
     assert float(m.group(1)) == pytest.approx(10.0, abs=0.5)
+
+
+def test_validate_rejects_a_moved_goal_placement(solved):
+    """The goal placement 2 cm from where the placing hand leaves the object: the object
+    would jump as the left hand opens, which the replay does not hide."""
+    _, src = solved
+
+    def change(d):
+        goal = next(p for p in d["placements"] if p["id"] == "goal")
+        goal["pose"][1][3] += 0.02
+
+    out = validate_rejects(tampered(src, "moved_goal.json", change))
+    assert re.search(r"^attachment open_left\[0\]: the object jumps by 20 mm, [\d.e+-]+ rad between the end of phase "
+                     r"place and placement 'goal'$", out, re.M), out
+
+
+def test_validate_rejects_a_swapped_holding(solved):
+    """The carry said to be held by the right hand with the left hand's grasp: refused
+    when the plan is read (a grasp id names a grasp of another hand), exit code 2."""
+    _, src = solved
+    d0 = json.loads(src.read_text())
+    left = next(g["id"] for g in d0["grasps"] if g["hand"] == "left")
+
+    def change(d):
+        d["phases"][2]["holding"] = {"right": left}
+
+    bad = tampered(src, "swapped.json", change)
+    assert_one_error_line(run("validate", bad), str(bad), "phases[2].holding.right", f"grasp {left!r}",
+                          "of the left hand")
+
+
+def test_validate_rejects_a_grasp_that_misses_the_object(solved):
+    """The right hand's grasp recorded 1 cm off along the grasp frame's x: where it holds,
+    the object is not where its grasp puts it."""
+    _, src = solved
+    d0 = json.loads(src.read_text())
+    gid = d0["phases"][2]["holding"]["right"]
+    i = next(i for i, g in enumerate(d0["grasps"]) if g["id"] == gid)
+
+    def change(d):
+        d["grasps"][i]["hand_in_object"][0][3] += 0.01
+
+    out = validate_rejects(tampered(src, "missed.json", change))
+    assert re.search(rf"^attachment carry\[0\]: the right hand's grasp {gid} puts the object 10 mm", out, re.M), out
 
 
 # --------------------------------------------------------------------------- missing artefacts
@@ -224,18 +287,18 @@ def test_unreachable_object_fails_at_double_grasps(solved, cache_dir, tmp_path):
     assert "Traceback" not in result.output
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
-    m = re.fullmatch(r"error: planning failed at stage 'double grasps': (.+)", lines[0])
+    m = re.fullmatch(r"error: planning failed at stage 'grasps': (.+)", lines[0])
     assert m, lines[0]
     reason = m.group(1)
     assert "right-hand" in reason and "start pose" in reason
     d = json.loads(out.read_text())
-    assert d["status"] == "failed"
-    assert d["failure"] == {"stage": "double grasps", "reason": reason}
+    assert (d["format"], d["status"]) == ("regrasp.plan/2", "failed")
+    assert d["failure"] == {"stage": "grasps", "transition": None, "reason": reason}
     assert d["phases"] == [] and d["grasps"] == [] and d["planner"] == "rrt-connect"
     # the checker reports the failure as the plan's one issue
     checked = run("validate", out)
     assert checked.exit_code == 1, checked.output
-    assert "status: the planner failed at stage double grasps" in checked.stdout
+    assert "status: the planner failed at stage grasps" in checked.stdout
 
 
 # --------------------------------------------------------------------------- the baseline
@@ -253,6 +316,8 @@ def test_rrt_connect_solves_the_default_scene(solved, cache_dir, plan_dir):
     p = read_plan(out)
     assert (p.status, p.planner, p.seed) == ("solved", "rrt-connect", RRT_SEED)
     assert tuple(ph.name for ph in p.phases) == PHASES
+    assert roles(p) == ROLES
+    assert_holds_its_grasps(p)
     assert "roadmap" not in p.stats["artefacts"]  # no roadmap was loaded
     report = validate_plan(out)
     assert report.valid, [str(i) for i in report.issues]

@@ -1,9 +1,12 @@
-"""The plan checker (regrasp_cli.validate) on synthetic plans of the default scene.
+"""The plan checker (regrasp_cli.validate) on synthetic plans (``regrasp.plan/2``) of the
+default scene.
 
 The plan is built here, not by the planner: the right hand takes the statuette with a
 grasp of the project's grasp search (its object placed where that grasp puts it, in front
-of the robot at rest), carries it a little, lets go and moves back.  The valid plan must
-pass; each test breaks one thing and expects the matching issue (or InputError).
+of the robot at rest: the ``start`` placement), carries it a little, lets go (the object
+rests at the ``goal`` placement, where the carry left it) and moves back.  Its phases have
+the kinds grasp, transfer, release and transit.  The valid plan must pass; each test
+breaks one thing and expects the matching issue (or InputError).
 """
 
 from __future__ import annotations
@@ -23,18 +26,22 @@ from regrasp_cli.errors import InputError, StaleArtefactError
 from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.single import GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import build_surface, sampling_step
+from regrasp_cli.commands.validate import print_validation
 from regrasp_cli.grasp.workspace import hand_workspace
+from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import ObjectPlacement
-from regrasp_cli.plan.timing import time_parameterise
+from regrasp_cli.motion.timing import time_parameterise
+from regrasp_cli.replay import Carry
 from regrasp_cli.spatial import inverse
 from regrasp_cli.store import sha256_file
-from regrasp_cli.trajectory import Phase, Plan, PlanGrasp, plan_to_dict, write_plan
-from regrasp_cli.validate import ValidationReport, print_validation, validate_plan
+from regrasp_cli.trajectory import Phase, Placement, Plan, PlanGrasp, plan_to_dict, write_plan
+from regrasp_cli.validate import ValidationReport, validate_plan
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT_DIR = ROOT / "configs" / "robots" / "humanoid43"
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
 HAND = "right"
+GRASP_ID = "right-0"  # the plan's id of its one grasp
 
 
 # ------------------------------------------------------------------ a synthetic plan
@@ -72,8 +79,8 @@ def held(problem):
     pytest.fail("no usable grasp in the first 256 x 8 grasp frames")
 
 
-def _motion(problem, q_grasp) -> list[tuple[str, tuple[str, ...], tuple[str, ...], np.ndarray]]:
-    """(name, holding, touching, waypoints) of each phase."""
+def _motion(problem, q_grasp) -> list[tuple[str, Kind, dict, tuple[str, ...], str | None, np.ndarray]]:
+    """(name, kind, holding, touching, placement, waypoints) of each phase."""
     robot = problem.robot
     h = robot.hands[HAND]
     q_open = problem.q_start
@@ -82,20 +89,27 @@ def _motion(problem, q_grasp) -> list[tuple[str, tuple[str, ...], tuple[str, ...
     q_released = q_moved.copy()
     q_released[h.idx] = h.open
     q_back = _joint(robot, q_released, l_arm_j1=-0.5, l_arm_j2=0.4)
-    return [("close_right", (), (HAND,), np.array([q_open, q_grasp])),
-            ("carry", (HAND,), (), np.array([q_grasp, q_mid, q_moved])),
-            ("open_right", (), (HAND,), np.array([q_moved, q_released])),
-            ("rest", (), (), np.array([q_released, q_back, q_released]))]
+    return [("close_right", Kind.GRASP, {}, (HAND,), "start", np.array([q_open, q_grasp])),
+            ("carry", Kind.TRANSFER, {HAND: GRASP_ID}, (), None, np.array([q_grasp, q_mid, q_moved])),
+            ("open_right", Kind.RELEASE, {}, (HAND,), "goal", np.array([q_moved, q_released])),
+            ("rest", Kind.TRANSIT, {}, (), "goal", np.array([q_released, q_back, q_released]))]
+
+
+def _retimed(phases, velocity, acceleration) -> tuple[Phase, ...]:
+    """``phases`` timed stop-at-every-waypoint, each starting when the previous one ends."""
+    out, t0 = [], 0.0
+    for p in phases:
+        times = t0 + time_parameterise(p.waypoints, velocity, acceleration)
+        out.append(replace(p, times=times))
+        t0 = float(times[-1])
+    return tuple(out)
 
 
 def _phases(motion, velocity, acceleration) -> tuple[Phase, ...]:
-    """Phases timed stop-at-every-waypoint, each starting when the previous one ends."""
-    out, t0 = [], 0.0
-    for name, holding, touching, wp in motion:
-        times = t0 + time_parameterise(wp, velocity, acceleration)
-        out.append(Phase(name, holding, touching, wp, times))
-        t0 = float(times[-1])
-    return tuple(out)
+    """The phases of ``motion`` (see :func:`_motion`), timed."""
+    phases = [Phase(name, kind, holding, touching, placement, wp, np.zeros(len(wp)))
+              for name, kind, holding, touching, placement, wp in motion]
+    return _retimed(phases, velocity, acceleration)
 
 
 @pytest.fixture(scope="module")
@@ -107,11 +121,11 @@ def base_plan(problem, held) -> Plan:
     velocity, acceleration = robot.velocity, 2.0 * robot.velocity
     motion = _motion(problem, q_grasp)
     X_WO_start = robot.fk(q_grasp, h.grasp_frame) @ inverse(g.X_OG)
-    X_WO_end = robot.fk(motion[1][3][-1], h.grasp_frame) @ inverse(g.X_OG)
+    X_WO_end = robot.fk(motion[1][-1][-1], h.grasp_frame) @ inverse(g.X_OG)
     fingers = [f.name for f in h.spec.fingers]
     contacts = tuple({"finger": fingers[f], "point": g.points[f], "normal": g.normals[f]}
                      for f in np.flatnonzero(g.in_contact))
-    grasp = PlanGrasp(HAND, 0, g.X_OG, h.spec.joints, g.finger_q, contacts, g.scores.total)
+    grasp = PlanGrasp(GRASP_ID, HAND, g.X_OG, h.spec.joints, g.finger_q, contacts, g.scores.total, 0)
     obstacles = tuple({"name": o.name, "shape": o.shape, "size": list(o.size), "pose": o.X_WO, "mesh": None}
                       for o in problem.spec.obstacles)
     stl = problem.object.to_stl_bytes()
@@ -128,7 +142,7 @@ def base_plan(problem, held) -> Plan:
         collision={"contact_tolerance": 0.002, "support_tolerance": 0.002,
                    "disabled_pairs": sorted(problem.disabled.links())},
         grasps=(grasp,),
-        object_poses={"start": X_WO_start, "exchange": X_WO_end, "goal": X_WO_end},
+        placements=(Placement("start", X_WO_start), Placement("goal", X_WO_end)),
         phases=_phases(motion, velocity, acceleration),
     )
 
@@ -162,9 +176,17 @@ def _with_waypoint(plan: Plan, phase: str, i: int, q: np.ndarray, retime: bool =
             wp[i] = q
         phases.append(replace(p, waypoints=wp))
     if retime:
-        v, a = np.asarray(plan.limits["velocity"]), np.asarray(plan.limits["acceleration"])
-        phases = _phases([(p.name, p.holding, p.touching, p.waypoints) for p in phases], v, a)
+        phases = _retimed(phases, *_limits(plan))
     return replace(plan, phases=tuple(phases))
+
+
+def _limits(plan: Plan) -> tuple[np.ndarray, np.ndarray]:
+    return np.asarray(plan.limits["velocity"]), np.asarray(plan.limits["acceleration"])
+
+
+def _with_phase(plan: Plan, name: str, **changes) -> Plan:
+    """``plan`` with the fields ``changes`` of phase ``name`` replaced."""
+    return replace(plan, phases=tuple(replace(p, **changes) if p.name == name else p for p in plan.phases))
 
 
 def _checks(report: ValidationReport) -> set[str]:
@@ -187,6 +209,7 @@ def test_valid_plan_is_valid(plan_dir, base_plan):
     assert report.configurations_checked > n_segments + len(base_plan.phases)
     assert set(report.seconds) == {p.name for p in base_plan.phases} | {"grasps"}
     assert [s.waypoints for s in report.phases] == [len(p.waypoints) for p in base_plan.phases]
+    assert [s.kind for s in report.phases] == ["grasp", "transfer", "release", "transit"]
 
 
 def test_absolute_paths_are_accepted(plan_dir, base_plan):
@@ -222,7 +245,7 @@ def test_print_validation(plan_dir, base_plan, problem):
     console = Console(record=True, width=120)
     print_validation(validate_plan(_write(plan_dir, base_plan)), console)
     text = console.export_text()
-    assert "carry" in text and "grasps" in text
+    assert "carry" in text and "transfer" in text and "grasps" in text
     assert text.strip().splitlines()[-1] == "valid"
 
     q = _joint(problem.robot, _phase(base_plan, "rest").waypoints[1], torso_yaw=0.7)
@@ -326,18 +349,69 @@ def test_fingers_must_stay_closed_while_holding(plan_dir, base_plan, problem):
 
 
 def test_holding_hand_needs_a_grasp(plan_dir, base_plan):
-    report = validate_plan(_write(plan_dir, replace(base_plan, grasps=())))
-    assert [(i.check, i.phase) for i in report.issues] == [("attachment", "carry")]
+    """A holding names a grasp of grasps[] by its id, of the holding hand: malformed input."""
+    with pytest.raises(InputError, match=f"grasp id '{GRASP_ID}' is not in grasps") as exc:
+        validate_plan(_write(plan_dir, replace(base_plan, grasps=())))
+    assert exc.value.field == f"phases[1].holding.{HAND}"
+    with pytest.raises(InputError, match="a grasp of the right hand, not of the left hand") as exc:
+        validate_plan(_write(plan_dir, _with_phase(base_plan, "carry", holding={"left": GRASP_ID})))
+    assert exc.value.field == "phases[1].holding.left"
 
 
-def test_object_must_reach_its_goal_and_exchange(plan_dir, base_plan):
-    poses = dict(base_plan.object_poses)
-    poses["goal"] = poses["goal"].copy()
-    poses["goal"][2, 3] += 0.01
-    poses["exchange"] = poses["start"]
-    report = validate_plan(_write(plan_dir, replace(base_plan, object_poses=poses)))
-    found = {(i.phase, i.message.split(" away from ")[-1]) for i in report.issues if i.check == "attachment"}
-    assert found == {("carry", "the exchange pose"), ("rest", "its goal pose")}
+def _moved(X: np.ndarray, dz: float) -> np.ndarray:
+    X = X.copy()
+    X[2, 3] += dz
+    return X
+
+
+def test_object_must_not_jump_and_must_reach_its_goal(plan_dir, base_plan):
+    """The release puts the object down at ``start`` (where the carry took it from, not
+    where it ended) and the plan rests there; the goal is 1 cm higher besides.  The object
+    jumps into the release, and ends away from its goal."""
+    start, goal = base_plan.placement("start"), base_plan.placement("goal")
+    plan = replace(base_plan, placements=(start, Placement("goal", _moved(goal.X_WO, 0.01))))
+    plan = _with_phase(_with_phase(plan, "open_right", placement="start"), "rest", placement="start")
+    report = validate_plan(_write(plan_dir, plan))
+    found = {(i.phase, i.waypoint, i.message.split(" and ")[-1] if "jumps" in i.message else
+              i.message.split(" away from ")[-1]) for i in report.issues if i.check == "attachment"}
+    assert found == {("open_right", 0, "placement 'start'"), ("rest", 2, "its goal placement")}, \
+        [str(i) for i in report.issues]
+
+
+def test_object_jumps_to_a_moved_placement(plan_dir, base_plan):
+    """The goal placement 1 cm above where the carry leaves the object: the release
+    starts with the object jumping there (the replay does not hide it)."""
+    goal = base_plan.placement("goal")
+    plan = replace(base_plan, placements=(base_plan.placement("start"), Placement("goal", _moved(goal.X_WO, 0.01))))
+    report = validate_plan(_write(plan_dir, plan))
+    jumps = [i for i in report.issues if i.check == "attachment"]
+    assert [(i.phase, i.waypoint) for i in jumps] == [("open_right", 0)], [str(i) for i in report.issues]
+    assert "jumps by 10 mm" in jumps[0].message and "end of phase carry" in jumps[0].message
+
+
+def test_an_intermediate_placement_where_the_object_is_put_down(plan_dir, base_plan):
+    """The object released at an intermediate placement ``table`` (where the carry leaves
+    it): valid when the goal is there too, and the end is checked against the goal, not
+    against the last placement."""
+    start, goal = base_plan.placement("start"), base_plan.placement("goal")
+    plan = replace(base_plan, placements=(start, goal, Placement("table", goal.X_WO)))
+    plan = _with_phase(_with_phase(plan, "open_right", placement="table"), "rest", placement="table")
+    report = validate_plan(_write(plan_dir, plan))
+    assert report.valid, [str(i) for i in report.issues]
+    plan = replace(plan, placements=(start, Placement("goal", _moved(goal.X_WO, 0.01)), Placement("table", goal.X_WO)))
+    report = validate_plan(_write(plan_dir, plan))
+    assert [(i.check, i.phase, i.waypoint) for i in report.issues] == [("attachment", "rest", 2)]
+    assert "ends 10 mm" in report.issues[0].message and "away from its goal placement" in report.issues[0].message
+
+
+def test_grasp_phase_moves_only_the_touching_fingers(plan_dir, base_plan, problem):
+    """The left arm moves while the right hand closes on the object: a kind issue."""
+    robot = problem.robot
+    wp = _phase(base_plan, "close_right").waypoints[0]
+    q = _joint(robot, wp, l_arm_j1=wp[robot.joint_names.index("l_arm_j1")] + 0.05)
+    report = validate_plan(_write(plan_dir, _with_waypoint(base_plan, "close_right", 0, q)))
+    assert [(i.check, i.phase, i.waypoint) for i in report.issues] == [("kind", "close_right", 1)]
+    assert "l_arm_j1" in report.issues[0].message and "grasp phase" in report.issues[0].message
 
 
 # ------------------------------------------------------------------ input errors
@@ -384,7 +458,8 @@ def test_malformed_json_is_an_input_error(plan_dir):
 
 
 @pytest.mark.parametrize("field", ["joint_names", "phases[1].times", "obstacles[0].pose", "limits.acceleration",
-                                   "grasps[0].contacts[0].normal", "object_poses.goal"])
+                                   "grasps[0].contacts[0].normal", "grasps[0].id", "placements[1].pose",
+                                   "phases[2].kind", "phases[1].holding", "phases[0].placement"])
 def test_missing_field_is_named(plan_dir, base_plan, field):
     d = plan_to_dict(base_plan)
     *parents, last = field.replace("[", ".").replace("]", "").split(".")
@@ -395,6 +470,52 @@ def test_missing_field_is_named(plan_dir, base_plan, field):
     with pytest.raises(InputError) as exc:
         validate_plan(_write_dict(plan_dir, d))
     assert exc.value.field == field
+
+
+def _set(d: dict, field: str, value) -> None:
+    *parents, last = field.replace("[", ".").replace("]", "").split(".")
+    node = d
+    for k in parents:
+        node = node[int(k)] if k.isdigit() else node[k]
+    node[int(last) if last.isdigit() else last] = value
+
+
+@pytest.mark.parametrize("field, value, named, words", [
+    ("phases[2].kind", "let-go", "phases[2].kind", "expected one of transit, transfer"),
+    ("phases[1].holding", {}, "phases[1].holding", "needs a hand holding"),
+    ("phases[3].holding", {HAND: GRASP_ID}, "phases[3].holding", "so no hand can hold it"),
+    ("phases[2].placement", None, "phases[2].placement", "object resting"),
+    ("phases[1].placement", "goal", "phases[1].placement", "not resting in a transfer phase"),
+    ("phases[3].placement", "shelf", "phases[3].placement", "'shelf' is not in placements[]"),
+    ("phases[0].touching", [], "phases[0].touching", "expected at least one hand"),
+    ("phases[3].touching", [HAND], "phases[3].touching", "no fingers move"),
+    ("phases[0].holding", {HAND: GRASP_ID}, "phases[0].holding", "so no hand can hold it"),
+    ("placements[0].id", "begin", "placements", "'start'"),
+    ("grasps[0].id", 7, "grasps[0].id", "expected str"),
+    ("format", "regrasp.plan/1", "format", "plan again with `regrasp plan"),
+    ("format", "regrasp.plan/3", "format", "expected 'regrasp.plan/2'"),
+])
+def test_inconsistent_plan_is_an_input_error(plan_dir, base_plan, field, value, named, words):
+    """What the kind of a phase says about holding, touching and placement, the grasp and
+    placement ids, and the format are checked when the plan is read."""
+    d = plan_to_dict(base_plan)
+    _set(d, field, value)
+    with pytest.raises(InputError) as exc:
+        validate_plan(_write_dict(plan_dir, d))
+    assert exc.value.field == named and words in exc.value.message, str(exc.value)
+
+
+def test_duplicate_ids_are_input_errors(plan_dir, base_plan):
+    d = plan_to_dict(base_plan)
+    d["grasps"].append(dict(d["grasps"][0]))
+    with pytest.raises(InputError, match="used twice") as exc:
+        validate_plan(_write_dict(plan_dir, d))
+    assert exc.value.field == "grasps[1].id"
+    d = plan_to_dict(base_plan)
+    d["placements"].append(dict(d["placements"][1]))
+    with pytest.raises(InputError, match="used twice") as exc:
+        validate_plan(_write_dict(plan_dir, d))
+    assert exc.value.field == "placements[2].id"
 
 
 def test_joint_names_must_be_the_robots(plan_dir, base_plan):
@@ -418,7 +539,7 @@ def test_failed_plan_gives_one_status_issue(plan_dir, base_plan):
 
 
 def test_rigid_links_only_while_the_holding_fingers_keep_their_values(base_plan, problem):
-    from regrasp_cli.validate import Carry, rigid_links
+    from regrasp_cli.validate import rigid_links
 
     robot = problem.robot
     carry = _phase(base_plan, "carry")
@@ -446,9 +567,8 @@ def test_fingers_closed_into_the_held_object_are_a_collision_once(plan_dir, base
         wp = p.waypoints.copy()
         for i in deeper.get(p.name, []):
             wp[i, h.idx] = np.minimum(wp[i, h.idx] + 0.4, problem.robot.upper[h.idx])
-        phases.append((p.name, p.holding, p.touching, wp))
-    v, a = np.asarray(base_plan.limits["velocity"]), np.asarray(base_plan.limits["acceleration"])
-    report = validate_plan(_write(plan_dir, replace(base_plan, phases=_phases(phases, v, a))))
+        phases.append(replace(p, waypoints=wp))
+    report = validate_plan(_write(plan_dir, replace(base_plan, phases=_retimed(phases, *_limits(base_plan)))))
     carry = [i for i in report.issues if i.phase == "carry"]
     assert ("collision", 0) in {(i.check, i.waypoint) for i in carry}, [str(i) for i in report.issues]
     hit = next(i for i in carry if i.check == "collision")

@@ -5,5 +5,5 @@ planners needs (after OMPL's benchmarking and Planner Arena).
 
 Modules: :mod:`.suite` (the suite YAML), :mod:`.runner` (offline timing, the runs),
 :mod:`.aggregate` (pure statistics over run records), :mod:`.report` (Markdown, rich,
-PNG), :mod:`.command` (the CLI entry).
+PNG); the CLI entry is :mod:`regrasp_cli.commands.bench`.
 """

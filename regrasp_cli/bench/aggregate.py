@@ -19,8 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-QUERIES = ("grasp", "carry", "place", "rest")
-STAGES = ("double grasps", "exchange", "queries", "timing")
+from regrasp_cli.manip.tasks.handover import TRANSITIONS as QUERIES  # the task benchmarked (seed 000)
 # the parts of a run's time drawn in the plot, in order: the planner's stages with the
 # queries split (planning + lazy validation of each; "queries, other": the rest of the
 # queries stage, key configuration lines and process overhead), then writing and
@@ -88,7 +87,8 @@ def summarise(records: list[dict], scene: str, planner: str) -> PlannerSummary:
     failures: dict[str, int] = {}
     for r in rs:
         if not r["solved"]:
-            failures[r["stage"]] = failures.get(r["stage"], 0) + 1
+            key = r["stage"] + (f" ({r['transition']})" if r.get("transition") else "")
+            failures[key] = failures.get(key, 0) + 1
     return PlannerSummary(
         scene, planner, len(rs), len(ok),
         spread(r["total_s"] for r in ok), spread(r["planner_s"] for r in ok),

@@ -22,11 +22,12 @@ from __future__ import annotations
 import platform
 
 from regrasp_cli.bench.aggregate import QUERIES, ordered, select
+from regrasp_cli.manip.status import Stage
 from regrasp_cli.bench.suite import DEFAULT_ITERATIONS
 
 # the outcome of a run: solved, or the stage where it stopped (planner stages, the
 # validator, the runner's budget and crash records)
-OUTCOMES = ("solved", "double grasps", "exchange", *QUERIES, "validation", "budget", "crash", "other")
+OUTCOMES = ("solved", *(s.value for s in Stage), "other")
 ENUM = "outcome"
 
 COLUMNS = (  # (name, OMPL type, value of a record)
@@ -64,7 +65,7 @@ def experiment_log(records: list[dict], meta: dict, scene: str) -> str:
     iterations = suite.get("iterations", DEFAULT_ITERATIONS)
     setup = [f"regrasp bench, suite {suite['name']} ({suite.get('file', '?')}), scene {scene}",
              f"budget {suite['budget_s']:g} s per run, {iterations} RRT-Connect iterations per "
-             f"query, roadmap {suite.get('roadmap_nodes', 50)} nodes per arm, joblib {meta.get('backend', '?')} "
+             f"query, roadmap {suite.get('roadmap_nodes', '?')} nodes per arm, joblib {meta.get('backend', '?')} "
              f"x {meta.get('jobs', '?')}",
              "libraries: " + ", ".join(f"{k} {v}" for k, v in m.get("libraries", {}).items())]
     L = [f"regrasp version {m['regrasp']}",

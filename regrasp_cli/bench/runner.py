@@ -11,7 +11,8 @@ stage (``crash``, ``budget``, or the planner's stage) and reason; it never stops
 
 One record per run (a JSON object, one line of ``runs.jsonl``)::
 
-    scene, planner, seed, solved, stage, reason     stage/reason None when solved
+    scene, planner, seed, solved, stage, reason     stage (a manip.status.Stage value)/reason None when solved
+    transition                                      the failing transition's label (stage "transition")
     total_s                                         planner + write + validate (s), or time to failure
     planner_s, write_s, validation_s                the three parts (s)
     stages_s: {double grasps, exchange, queries, timing}
@@ -44,7 +45,7 @@ from typing import Callable
 
 import numpy as np
 
-from regrasp_cli.bench.aggregate import QUERIES, STAGES
+from regrasp_cli.manip.status import Stage
 from regrasp_cli.bench.suite import DEFAULT_ITERATIONS, REFERENCE, Suite
 
 
@@ -96,12 +97,12 @@ def _snapshot(folder: Path) -> dict[str, int]:
     return {str(p): p.stat().st_mtime_ns for p in folder.glob("*.h5")} if folder.is_dir() else {}
 
 
-def offline_stages(suite: Suite, cache_dir: Path, jobs: int, console) -> dict[str, dict]:
+def offline_stages(suite: Suite, cache_dir: Path, jobs: int, builder=None) -> dict[str, dict]:
     """Per scene label: seconds and status (``built`` or ``cached``) of loading the
     problem, the grasp lists of both hands and the roadmap (when a planner needs it),
     building whichever is missing or stale, and of making the Super Graph ready."""
-    from regrasp_cli.plan.command import load_artefacts
-    from regrasp_cli.plan.queries import Roadmap
+    from regrasp_cli.artefacts import load_artefacts
+    from regrasp_cli.manip.queries import Roadmap
     from regrasp_cli.scene import load_problem
 
     need_roadmap = REFERENCE in suite.planners
@@ -116,7 +117,7 @@ def offline_stages(suite: Suite, cache_dir: Path, jobs: int, console) -> dict[st
                 continue
             before = _snapshot(Path(cache_dir) / folder)
             t0 = time.perf_counter()
-            lists, art, _ = load_artefacts(scene, cache_dir, problem, True, jobs, roadmap, console,
+            lists, art, _ = load_artefacts(scene, cache_dir, problem, True, jobs, roadmap, builder,
                                            suite.roadmap_nodes, suite.grasp_target)
             seconds = time.perf_counter() - t0
             built = _snapshot(Path(cache_dir) / folder) != before
@@ -139,16 +140,14 @@ def offline_stages(suite: Suite, cache_dir: Path, jobs: int, console) -> dict[st
 def _context(scene_file: str, cache_dir: str, with_roadmap: bool, roadmap_nodes: int, grasp_target: int | None):
     """Problem, grasp lists, Roadmap (or None), artefact hashes and path-length weights of
     a scene, loaded once per worker process (the parent built the artefacts)."""
-    from rich.console import Console
-
-    from regrasp_cli.plan.command import load_artefacts
-    from regrasp_cli.plan.queries import Roadmap
-    from regrasp_cli.roadmap.local import joint_weights
+    from regrasp_cli.artefacts import load_artefacts
+    from regrasp_cli.manip.queries import Roadmap
+    from regrasp_cli.motion.local import joint_weights
     from regrasp_cli.scene import load_problem
 
     problem = load_problem(scene_file, Path(cache_dir))
     lists, art, hashes = load_artefacts(Path(scene_file), Path(cache_dir), problem, False, 1, with_roadmap,
-                                        Console(stderr=True), roadmap_nodes, grasp_target)
+                                        None, roadmap_nodes, grasp_target)
     # one metric for every planner, so that path lengths compare
     return problem, lists, Roadmap.of(art) if art is not None else None, hashes, joint_weights(problem.robot)
 
@@ -156,7 +155,7 @@ def _context(scene_file: str, cache_dir: str, with_roadmap: bool, roadmap_nodes:
 def path_length(phases, weights: np.ndarray) -> float:
     """Sum of the weighted joint-space lengths of the straight segments between
     consecutive waypoints of every phase (``phases``: objects with ``waypoints`` (k, nq))."""
-    from regrasp_cli.roadmap.local import distance
+    from regrasp_cli.motion.local import distance
 
     total = 0.0
     for p in phases:
@@ -167,14 +166,15 @@ def path_length(phases, weights: np.ndarray) -> float:
 
 
 def regrasps(phases) -> int:
-    """How many times the object passes from one hand to the other (1 for a hand-over)."""
-    holders = [p.holding[0] for p in phases if len(p.holding) == 1]
+    """How many times a grasp is replaced by another (1 for a hand-over): changes of the
+    holding grasp over the phases where one hand holds (``holding``: hand -> grasp id)."""
+    holders = [tuple(p.holding.items()) for p in phases if len(p.holding) == 1]
     return sum(a != b for a, b in zip(holders, holders[1:]))
 
 
 def _base(item: RunItem) -> dict:
     return {"scene": item.scene, "planner": item.planner, "seed": item.seed, "solved": False,
-            "stage": None, "reason": None, "total_s": None, "planner_s": None, "write_s": None,
+            "stage": None, "transition": None, "reason": None, "total_s": None, "planner_s": None, "write_s": None,
             "validation_s": None, "stages_s": {}, "queries": {}, "validation": None, "path_length": None,
             "regrasps": None, "motion_s": None, "waypoints": None, "plan": None, "peak_rss_mb": None}
 
@@ -187,9 +187,9 @@ def peak_rss_mb() -> float:
 
 def execute(item: RunItem) -> dict:
     """The run itself, in this process; raises whatever the planner raises."""
-    from regrasp_cli.plan.command import make_plan
-    from regrasp_cli.plan.context import OnlineOptions
-    from regrasp_cli.plan.planner import run
+    from regrasp_cli.manip.context import OnlineOptions
+    from regrasp_cli.manip.record import make_plan
+    from regrasp_cli.manip.tasks import handover
     from regrasp_cli.trajectory import write_plan
     from regrasp_cli.validate import validate_plan
 
@@ -202,7 +202,7 @@ def execute(item: RunItem) -> dict:
                             rrt=replace(default.rrt, max_iterations=item.iterations))
     out_file = Path(item.plan_file)
     t0 = time.perf_counter()
-    outcome = run(problem, lists, roadmap if item.planner == REFERENCE else None, options, item.seed)
+    outcome = handover.plan(problem, lists, roadmap if item.planner == REFERENCE else None, options, item.seed)
     t1 = time.perf_counter()
     plan = make_plan(problem, lists, outcome, options, item.seed, out_file, Path(item.cache_dir), hashes,
                      timings=True)
@@ -210,20 +210,18 @@ def execute(item: RunItem) -> dict:
     t2 = time.perf_counter()
     report = validate_plan(out_file, jobs=1) if outcome.failure is None else None
     t3 = time.perf_counter()
-    tm, qs = outcome.timing, outcome.stats.get("queries", {})
     rec.update({
         "total_s": t3 - t0, "planner_s": t1 - t0, "write_s": t2 - t1, "validation_s": t3 - t2,
-        "stages_s": {k: float(tm.get(k, 0.0)) for k in STAGES},
-        "queries": {q: {"n": int(qs[q].get("nodes", 0)), "invalid_edges": int(qs[q].get("invalid_edges", 0)),
-                        "rrt_calls": int(qs[q].get("rrt_calls", 0)),
-                        "planning_s": float(tm.get(f"{q} planning", 0.0)),
-                        "validation_s": float(tm.get(f"{q} validation", 0.0))} for q in QUERIES if q in qs},
+        "stages_s": {k: float(v) for k, v in outcome.stages.items()},
+        "queries": {q: {"n": s.nodes, "invalid_edges": s.invalid_edges, "rrt_calls": s.rrt_calls,
+                        "planning_s": s.planning_s, "validation_s": s.validation_s} for q, s in outcome.transitions.items()},
         "plan": out_file.name,
     })
     if outcome.failure is not None:
-        rec["stage"], rec["reason"] = outcome.failure.stage, outcome.failure.reason
+        f = outcome.failure
+        rec["stage"], rec["transition"], rec["reason"] = f.stage.value, f.transition, f.reason
         return rec
-    rec.update({"path_length": path_length(outcome.phases, weights), "regrasps": regrasps(outcome.phases),
+    rec.update({"path_length": path_length(plan.phases, weights), "regrasps": regrasps(plan.phases),
                 "motion_s": float(plan.duration), "waypoints": int(sum(len(p.waypoints) for p in plan.phases)),
                 "validation": {"valid": report.valid, "issues": len(report.issues),
                                "first_issues": [str(i) for i in report.issues[:3]],
@@ -231,7 +229,7 @@ def execute(item: RunItem) -> dict:
     if report.valid:
         rec["solved"] = True
     else:
-        rec["stage"] = "validation"
+        rec["stage"] = Stage.VALIDATION.value
         rec["reason"] = f"the written plan fails {len(report.issues)} check(s); first: {report.issues[0]}"
     return rec
 
@@ -239,7 +237,7 @@ def execute(item: RunItem) -> dict:
 def _crash(item: RunItem, exc: BaseException, seconds: float) -> dict:
     rec = _base(item)
     message = " ".join(str(exc).split()) or "(no message)"
-    rec.update({"stage": "crash", "reason": f"{type(exc).__name__}: {message}", "total_s": seconds,
+    rec.update({"stage": Stage.CRASH.value, "reason": f"{type(exc).__name__}: {message}", "total_s": seconds,
                 "traceback": traceback.format_exc(limit=8)})
     return rec
 
@@ -323,12 +321,12 @@ def run_one(item: RunItem, work: Callable[[RunItem], dict] = execute) -> dict:
             return pickle.loads(data)
         rec = _base(item)
         if status is None:
-            rec.update({"stage": "budget", "reason": f"exceeded the budget of {item.budget_s:g} s (killed)",
+            rec.update({"stage": Stage.BUDGET.value, "reason": f"exceeded the budget of {item.budget_s:g} s (killed)",
                         "total_s": time.perf_counter() - t0})
             return rec
         code = os.waitstatus_to_exitcode(status)
         how = f"killed by signal {-code}" if code < 0 else f"exit code {code}"
-        rec.update({"stage": "crash", "reason": f"the run's process died ({how})",
+        rec.update({"stage": Stage.CRASH.value, "reason": f"the run's process died ({how})",
                     "total_s": time.perf_counter() - t0})
         return rec
     finally:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from regrasp_cli.config import Fields, read_yaml, resolve_path
 from regrasp_cli.errors import InputError
+from regrasp_cli.roadmap.build import RoadmapOptions
 
 SUITE_FORMAT = "regrasp.bench/1"
 # planners a suite may name; the roadmap is the reference of the per-seed ratios, and the
@@ -39,7 +40,7 @@ class Suite:
     planners: tuple[str, ...]
     seeds: tuple[int, ...]
     budget_s: float = DEFAULT_BUDGET_S
-    roadmap_nodes: int = 50
+    roadmap_nodes: int = RoadmapOptions.nodes
     grasp_target: int | None = None
     iterations: int = DEFAULT_ITERATIONS
 

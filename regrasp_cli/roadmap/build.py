@@ -25,7 +25,7 @@ from regrasp_cli.parallel import ordered_map
 from regrasp_cli.roadmap.compose import (LEFT, RIGHT, SuperGraph, UnionFind, candidate_edges, compose_nodes,
                                          edge_kind, involving, link_parts, margin_rule, mixed, part_filter,
                                          subsystem)
-from regrasp_cli.roadmap.local import LocalPlanner, distance, joint_reach, joint_weights
+from regrasp_cli.motion.local import LocalPlanner, distance, joint_reach, joint_weights
 from regrasp_cli.roadmap.visprm import Roadmap, VisPRMOptions, visibility_prm
 from regrasp_cli.scene import Problem, load_problem
 from regrasp_cli.store import Provenance, canonical_json, read_artefact, read_provenance, sha256_file, \

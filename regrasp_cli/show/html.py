@@ -214,9 +214,10 @@ def scene_commands(view: PlanView, motion: Motion, source: str = "visual") -> tu
         cmds += shape_commands(s, _path("plan", "obstacles", s.name))
     obj = mesh_shape("mesh", view.inputs.mesh)
     cmds += shape_commands(obj, _path("plan", "object", "mesh"))
-    if "goal" in view.plan.object_poses:
+    goal = view.plan.placement("goal")
+    if goal is not None:
         cmds += shape_commands(obj, _path("plan", "goal", "mesh"), opacity=GOAL_OPACITY)
-        cmds.append(_set_transform(view.plan.object_poses["goal"], _path("plan", "goal")))
+        cmds.append(_set_transform(goal.X_WO, _path("plan", "goal")))
 
     X_WL = np.array([link_poses(robot, soups.links, q) for q in motion.q])  # (m, L, 4, 4)
     tracks = {}
@@ -266,7 +267,8 @@ def plan_page(view: PlanView, fps: float = 25.0, source: str = "visual") -> str:
     bundle, meshcat_version = viewer_bundle()
     plan = view.plan
     phases = [{"name": p.name, "start": float(p.times[0]), "end": float(p.times[-1]),
-               "holding": list(p.holding), "text": holding_text(p.holding, p.touching)} for p in plan.phases]
+               "kind": p.kind.value, "holding": list(p.holding),
+               "text": f"{holding_text(p.holding, p.touching)} ({p.kind.value})"} for p in plan.phases]
     scene_name = Path(str(plan.scene.get("file", ""))).name or view.file.name
     data = {
         "title": f"{view.file.name}: {scene_name}, {plan.planner} planner, seed {plan.seed}",

@@ -1,13 +1,12 @@
 """A plan's motion for viewing: the robot's configuration and the object's pose over time,
 and the key frames (start, pick, exchange, place, end).
 
-Viewing only (not a paper section).  The plan is reloaded with the validator's loader
-(:func:`regrasp_cli.validate.load_inputs`: the robot, object and obstacles it names,
-refused when stale), and the object is followed through the phases as the validator does
-(:func:`regrasp_cli.validate.attachment_issues`): it rests where it is while no hand holds
-it, otherwise ``X_WO = X_WG(q) @ X_GO`` with X_GO fixed at the phase start.  Between
+Viewing only (not a paper section).  The plan is reloaded and the object followed through
+the phases by :mod:`regrasp_cli.replay`, as the validator does: it rests at the phase's
+placement while no hand holds it, otherwise ``X_WO = X_WG(q) @ X_GO`` with X_GO fixed at
+the phase start.  Key frames come from the phases' kinds, never their names.  Between
 waypoints the robot moves on straight joint-space segments with the trapezoidal timing of
-:mod:`regrasp_cli.plan.timing`, evaluated at the plan's waypoint times.
+:mod:`regrasp_cli.motion.timing`, evaluated at the plan's waypoint times.
 
 Times are seconds from the plan start; configurations (nq,) in the plan's joint order
 (rad or m); poses 4x4 in the robot base frame W (m).
@@ -21,13 +20,14 @@ from pathlib import Path
 import numpy as np
 
 from regrasp_cli.errors import InputError
-from regrasp_cli.plan.timing import evaluate_trajectory
+from regrasp_cli.motion.timing import evaluate_trajectory
 from regrasp_cli.show.geometry import (LinkShapes, Soup, link_poses, mesh_shape, obstacle_shapes, robot_links,
                                        robot_soup, shapes_soup)
+from regrasp_cli.manip.modes import Kind
+from regrasp_cli.replay import Carry, Inputs, follow, load_inputs
 from regrasp_cli.trajectory import Plan, read_plan
-from regrasp_cli.validate import Carry, Inputs, attachment_issues, load_inputs
 
-KEY_FRAMES = ("start", "pick", "exchange", "place", "end")
+KEY_FRAMES = ("start", "pick", "exchange", "place", "end")  # kinds of key frame, see key_frames
 MAX_FPS = 120
 
 
@@ -87,15 +87,8 @@ def load_plan_view(path: str | Path) -> PlanView:
                                          f"({f.get('reason', 'no reason given')}): there is no motion to show")
     if not plan.phases:
         raise InputError(path, "phases", "no phase: there is no motion to show")
-    if "start" not in plan.object_poses:
-        raise InputError(path, "object_poses.start", "missing")
     inputs = load_inputs(plan, path)
-    X_WO = plan.object_poses["start"]
-    carries = []
-    for phase in plan.phases:
-        carry, _ = attachment_issues(plan, phase, inputs.robot, X_WO)  # issues are the validator's business
-        carries.append(carry)
-        X_WO = carry.X_WO(inputs.robot, phase.waypoints[-1])
+    carries, _ = follow(path, plan, inputs.robot)  # issues are the validator's business
     return PlanView(path, plan, inputs, tuple(carries))
 
 
@@ -144,23 +137,36 @@ def sample_motion(view: PlanView, fps: float = 25.0) -> Motion:
     return Motion(t, q, k, X_WO)
 
 
+def _key_phases(phases) -> list[tuple[str, int]]:
+    """(kind of key frame, index of the phase it ends) in order: ``pick`` ends a grasp (a
+    hand closed on the resting object), ``exchange`` the first of consecutive hand-over
+    phases (both hands on it), ``place`` a transfer followed by a release (the object set
+    down, still held)."""
+    out = []
+    for i, p in enumerate(phases):
+        nxt = phases[i + 1].kind if i + 1 < len(phases) else None
+        prev = phases[i - 1].kind if i else None
+        if p.kind == Kind.GRASP:
+            out.append(("pick", i))
+        elif p.kind == Kind.HANDOVER and prev != Kind.HANDOVER:
+            out.append(("exchange", i))
+        elif p.kind == Kind.TRANSFER and nxt == Kind.RELEASE:
+            out.append(("place", i))
+    return out
+
+
 def key_frames(view: PlanView) -> tuple[KeyFrame, ...]:
-    """The plan's key frames, in time order: ``start`` (first waypoint), ``pick`` (end of
-    the first ``close_*`` phase: the first hand closed on the object), ``exchange`` (end of
-    the second ``close_*``: both hands on it at the exchange pose), ``place`` (end of
-    ``place``: the object on its goal), ``end`` (last waypoint).  A key frame whose phase
-    the plan does not have is left out."""
+    """The plan's key frames, in time order: ``start`` (first waypoint), then the pick,
+    exchange and place moments of :func:`_key_phases` (a second one of a kind is named
+    ``pick-2`` and so on, as in a regrasp through an intermediate placement), then ``end``
+    (last waypoint)."""
     phases = view.plan.phases
-    closes = [i for i, p in enumerate(phases) if p.name.startswith("close_")]
-    place = [i for i, p in enumerate(phases) if p.name == "place"]
-    ends = {"pick": closes[0] if closes else None, "exchange": closes[1] if len(closes) > 1 else None,
-            "place": place[0] if place else None, "end": len(phases) - 1}
     q0 = phases[0].waypoints[0]
     out = [KeyFrame("start", 0, float(phases[0].times[0]), q0, view.X_WO(0, q0))]
-    for name in KEY_FRAMES[1:]:
-        i = ends[name]
-        if i is None:
-            continue
+    seen: dict[str, int] = {}
+    for kind, i in _key_phases(phases) + [("end", len(phases) - 1)]:
+        seen[kind] = seen.get(kind, 0) + 1
+        name = kind if seen[kind] == 1 else f"{kind}-{seen[kind]}"
         q = phases[i].waypoints[-1]
         out.append(KeyFrame(name, i, float(phases[i].times[-1]), q, view.X_WO(i, q)))
     return tuple(out)

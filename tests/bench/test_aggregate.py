@@ -21,7 +21,8 @@ def rec(planner: str, seed: int, solved: bool, total: float, scale: float = 1.0,
     qs = {q: {"n": int(n * scale), "planning_s": p * scale, "invalid_edges": int(i * scale),
               "validation_s": v * scale, "rrt_calls": 0} for q, (n, p, i, v) in queries.items()}
     return {"scene": "desk", "planner": planner, "seed": seed, "solved": solved,
-            "stage": None if solved else "place", "reason": None if solved else "no path",
+            "stage": None if solved else "transition", "transition": None if solved else "place",
+            "reason": None if solved else "no path",
             "total_s": total, "planner_s": total / 2, "write_s": 0.01, "validation_s": total / 2 - 0.01,
             "stages_s": {"double grasps": 0.1, "exchange": 0.2, "queries": 1.5, "timing": 0.0},
             "queries": qs, "path_length": 10.0 + seed if solved else None, "regrasps": 1 if solved else None,
@@ -47,7 +48,7 @@ def test_summary_counts_every_run_and_times_only_solved_ones():
     assert (s.runs, s.solved) == (6, 4)
     assert s.success_rate == pytest.approx(4 / 6)
     assert (s.total_s.median, s.total_s.q25, s.total_s.q75) == (2.5, 1.75, 3.25)  # failed 9 s and 7 s left out
-    assert s.failures == {"place": 2}
+    assert s.failures == {"transition (place)": 2}
     assert s.path_length.median == pytest.approx(11.5)
     assert s.peak_rss_mb.n == 6  # memory of every run
     r = summarise(RECORDS, "desk", "rrt-connect")
@@ -111,4 +112,4 @@ def test_markdown_has_every_table():
     assert "| desk | rrt-connect | 2 | 3.50x |" in text
     assert "### desk, roadmap" in text and "| query | planning n | planning T (s) |" in text
     assert "## Failures (5)" in text  # 2 roadmap + 3 rrt-connect
-    assert summary_rows(RECORDS)[1][10] == "place 3"
+    assert summary_rows(RECORDS)[1][10] == "transition (place) 3"

@@ -43,7 +43,8 @@ def test_ompl_reads_every_run_with_its_time_and_outcome(tmp_path):
         assert OUTCOMES[outcome] == ("solved" if r["solved"] else r["stage"])
         assert states == sum(q["n"] for q in r["queries"].values())
     enum = dict(db.execute("SELECT value, description FROM enums WHERE name = 'outcome'"))
-    assert enum[0] == "solved" and enum[OUTCOMES.index("place")] == "place"
+    assert enum[0] == "solved" and enum[OUTCOMES.index("transition")] == "transition"
+    assert [enum[i] for i in range(len(OUTCOMES))] == list(OUTCOMES)  # every Stage value, then "other"
 
 
 def test_a_run_killed_over_budget_has_its_time_and_empty_columns(tmp_path):

@@ -73,10 +73,17 @@ def test_a_scene_that_does_not_load_is_a_crash_not_an_exception(tmp_path):
 
 def test_path_length_and_regrasps_on_a_hand_over():
     w = np.array([1.0, 0.25])
-    phases = [SimpleNamespace(holding=(), waypoints=np.array([[0.0, 0.0], [3.0, 0.0]])),
-              SimpleNamespace(holding=("right",), waypoints=np.array([[3.0, 0.0], [3.0, 8.0], [3.0, 8.0]])),
-              SimpleNamespace(holding=("left",), waypoints=np.array([[3.0, 8.0]])),
-              SimpleNamespace(holding=(), waypoints=np.zeros((0, 2)))]
+    # ``holding`` as in a plan's phases: hand -> grasp id
+    phases = [SimpleNamespace(holding={}, waypoints=np.array([[0.0, 0.0], [3.0, 0.0]])),
+              SimpleNamespace(holding={"right": "right-3"}, waypoints=np.array([[3.0, 0.0], [3.0, 8.0], [3.0, 8.0]])),
+              SimpleNamespace(holding={"right": "right-3", "left": "left-0"}, waypoints=np.array([[3.0, 8.0]])),
+              SimpleNamespace(holding={"left": "left-0"}, waypoints=np.array([[3.0, 8.0]])),
+              SimpleNamespace(holding={}, waypoints=np.zeros((0, 2)))]
     assert path_length(phases, w) == pytest.approx(3.0 + 4.0)  # sqrt(0.25 * 64) = 4
-    assert regrasps(phases) == 1
-    assert regrasps(phases[:2]) == 0
+    assert regrasps(phases) == 1  # right to left; the two-hand phase is no change of grasp
+    assert regrasps(phases[:3]) == 0
+    # the same hand holding with another grasp is a regrasp too; the same grasp again is not
+    again = [SimpleNamespace(holding={"right": "right-3"}, waypoints=np.zeros((0, 2))),
+             SimpleNamespace(holding={"right": "right-3"}, waypoints=np.zeros((0, 2))),
+             SimpleNamespace(holding={"right": "right-5"}, waypoints=np.zeros((0, 2)))]
+    assert regrasps(again) == 1 and regrasps(again[:2]) == 0

@@ -10,7 +10,7 @@ import yaml
 
 from regrasp_cli.bench.suite import PLANNERS, load_suite, with_overrides
 from regrasp_cli.errors import InputError
-from regrasp_cli.plan.context import OnlineOptions
+from regrasp_cli.manip.context import OnlineOptions
 
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT = ROOT / "configs" / "bench" / "default.yaml"

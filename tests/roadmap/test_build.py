@@ -22,7 +22,7 @@ from regrasp_cli.model.robot import load_robot
 from regrasp_cli.roadmap import compose
 from regrasp_cli.roadmap.build import (RoadmapArtefact, RoadmapOptions, artefact_path, build_roadmap, load_or_build,
                                        provenance, q_base, read_roadmap, summary)
-from regrasp_cli.roadmap.local import distance
+from regrasp_cli.motion.local import distance
 from regrasp_cli.scene import load_problem
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -80,7 +80,7 @@ def test_shortest_path_ignores_unknown_sources(graph):
 
 def test_shortest_path_on_a_built_super_graph_is_a_chain_of_edges():
     """A real (tiny) Super Graph through the planner's Roadmap: the path follows stored edges."""
-    from regrasp_cli.plan.queries import Roadmap as QueryRoadmap
+    from regrasp_cli.manip.queries import Roadmap as QueryRoadmap
     from regrasp_cli.roadmap.build import RoadmapArtefact
     from regrasp_cli.roadmap.compose import SuperGraph
     from regrasp_cli.roadmap.visprm import Roadmap

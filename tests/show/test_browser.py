@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from regrasp_cli.manip.modes import Kind
 from regrasp_cli.show.geometry import robot_links
 
 # --headless --no-sandbox --disable-gpu as asked; software WebGL (SwiftShader) must then be
@@ -118,10 +119,10 @@ def test_the_page_runs_in_chromium(browser, shown, view):
     seek(browser, 0.0)
     start = canvas_middle(browser)
     assert browser.execute_script("return viewer.renderer.info.render.triangles") > 1000
-    t_exchange = next(float(p.times[-1]) for p in view.plan.phases if p.name == "close_left")
-    seek(browser, t_exchange - 0.01)
+    handover = next(p for p in view.plan.phases if p.kind == Kind.HANDOVER)  # the taker closes: close_left
+    seek(browser, float(handover.times[-1]) - 0.01)
     exchange = canvas_middle(browser)
-    assert browser.execute_script("return document.getElementById('phase').textContent").endswith("close_left")
+    assert browser.execute_script("return document.getElementById('phase').textContent").endswith(handover.name)
 
     severe = [e for e in browser.get_log("browser") if e["level"] == "SEVERE"]
     assert not severe, severe

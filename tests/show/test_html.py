@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 import umsgpack
 
+from regrasp_cli.manip.modes import Kind
 from regrasp_cli.show.geometry import robot_links
 from regrasp_cli.show.html import pose_keys
+from regrasp_cli.spatial import inverse
 
 
 def page_data(page) -> dict:
@@ -70,16 +72,20 @@ def test_every_link_and_the_object_are_animated_over_the_whole_plan(page, view):
 
 def test_the_object_track_passes_through_the_exchange_pose(page, view):
     """The object's position keys, interpolated as the viewer does (linearly), put it at
-    the exchange pose at the end of the carry (keys are float32)."""
+    the start placement first, and at the end of the carry (the first transfer) where the
+    carrying hand's grasp puts it: the exchange pose (keys are float32)."""
     anim = commands(page)[-1]
     clip = next(a["clip"] for a in anim["animations"] if a["path"] == "/plan/object")
     keys = next(t["keys"] for t in clip["tracks"] if t["name"] == ".position")
-    t_exchange = next(float(p.times[-1]) for p in view.plan.phases if p.name == "carry")
+    carry = next(p for p in view.plan.phases if p.kind == Kind.TRANSFER)
+    (hand, gid), = carry.holding.items()
+    robot = view.inputs.robot
+    X_exchange = robot.fk(carry.waypoints[-1], robot.hands[hand].grasp_frame) @ inverse(view.plan.grasp(gid).X_OG)
     times = np.array([k["time"] / clip["fps"] for k in keys])
     values = np.array([k["value"] for k in keys])
-    p = [np.interp(t_exchange, times, values[:, j]) for j in range(3)]
-    np.testing.assert_allclose(p, view.plan.object_poses["exchange"][:3, 3], atol=1e-4)
-    np.testing.assert_allclose(values[0], view.plan.object_poses["start"][:3, 3], atol=1e-5)
+    p = [np.interp(float(carry.times[-1]), times, values[:, j]) for j in range(3)]
+    np.testing.assert_allclose(p, X_exchange[:3, 3], atol=1e-4)
+    np.testing.assert_allclose(values[0], view.plan.placement("start").X_WO[:3, 3], atol=1e-5)
 
 
 def test_the_page_lists_the_phases_and_key_frames(page, view):
@@ -87,7 +93,7 @@ def test_the_page_lists_the_phases_and_key_frames(page, view):
     assert [p["name"] for p in data["phases"]] == [p.name for p in view.plan.phases]
     for p, ph in zip(data["phases"], view.plan.phases):
         assert p["start"] == pytest.approx(ph.times[0]) and p["end"] == pytest.approx(ph.times[-1])
-        assert p["holding"] == list(ph.holding)
+        assert p["holding"] == list(ph.holding) and p["kind"] == ph.kind.value
     assert data["duration"] == pytest.approx(view.duration)
     assert [k["name"] for k in data["keyframes"]] == ["start", "pick", "exchange", "place", "end"]
 

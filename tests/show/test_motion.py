@@ -1,14 +1,22 @@
-"""The plan's motion as the viewer draws it: the object at its recorded poses and riding
-with the holding hand, the sampled motion through every waypoint, the key frames at the
-plan's moments."""
+"""The plan's motion as the viewer draws it: the object at its placements and riding with
+the holding hand where its grasp puts it, the sampled motion through every waypoint, the
+key frames at the plan's moments (found from the phases' kinds)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from regrasp_cli.manip.modes import Kind
 from regrasp_cli.show.motion import KEY_FRAMES, frame_soup, key_frames, plan_soups, sample_motion, sample_times
 from regrasp_cli.spatial import inverse, pose_error
+
+
+def held_poses(view, phase: int, q: np.ndarray) -> dict[str, np.ndarray]:
+    """Per hand holding the object in ``phase``: where its grasp puts the object (4, 4) at q."""
+    robot = view.inputs.robot
+    return {hand: robot.fk(q, robot.hands[hand].grasp_frame) @ inverse(view.plan.grasp(gid).X_OG)
+            for hand, gid in view.plan.phases[phase].holding.items()}
 
 
 # ------------------------------------------------------------------ the plan's motion
@@ -19,27 +27,42 @@ def test_key_frames_are_the_plan_moments(view):
     phases = view.plan.phases
     assert tuple(kf.name for kf in frames) == KEY_FRAMES
     assert [phases[kf.phase].name for kf in frames] == ["grasp", "close_right", "close_left", "place", "rest"]
+    assert [phases[kf.phase].kind for kf in frames] == [Kind.TRANSIT, Kind.GRASP, Kind.HANDOVER, Kind.TRANSFER,
+                                                         Kind.TRANSIT]
     assert np.all(np.diff([kf.t for kf in frames]) > 0)
     np.testing.assert_array_equal(frames[0].q, phases[0].waypoints[0])
     np.testing.assert_array_equal(frames[-1].q, phases[-1].waypoints[-1])
     assert frames[-1].t == pytest.approx(view.duration)
 
 
+def exchange_pose(view, kf) -> np.ndarray:
+    """Where the giving hand's grasp puts the object at the exchange key frame, after
+    checking that the taking hand's grasp (it holds in the next phase) puts it there too."""
+    given = held_poses(view, kf.phase, kf.q)
+    taken = held_poses(view, kf.phase + 1, kf.q)
+    assert set(given) == {"right"} and set(taken) == {"left"}
+    dp, da = pose_error(given["right"], taken["left"])
+    assert dp < 1e-4 and da < 1e-3, (dp, da)
+    return given["right"]
+
+
 @pytest.mark.parametrize("name, pose", [("start", "start"), ("pick", "start"), ("exchange", "exchange"),
                                         ("place", "goal"), ("end", "goal")])
-def test_the_object_is_at_its_recorded_pose_in_the_key_frames(view, name, pose):
+def test_the_object_is_at_its_placement_or_grasp_pose_in_the_key_frames(view, name, pose):
+    """At its start and goal placements, and at the exchange where both hands' grasps put it."""
     kf = next(k for k in key_frames(view) if k.name == name)
-    dp, da = pose_error(kf.X_WO, view.plan.object_poses[pose])
+    expected = exchange_pose(view, kf) if pose == "exchange" else view.plan.placement(pose).X_WO
+    dp, da = pose_error(kf.X_WO, expected)
     assert dp < 1e-4 and da < 1e-3, (name, dp, da)  # the plan's IK is good to a few micrometres
 
 
 def test_the_drawn_object_is_the_mesh_at_the_exchange_pose(view):
-    """The triangles drawn for the exchange frame hold the object's mesh moved to
-    object_poses.exchange (the object's triangles come last)."""
+    """The triangles drawn for the exchange frame hold the object's mesh moved to where
+    the hands' grasps put it (the object's triangles come last)."""
     kf = next(k for k in key_frames(view) if k.name == "exchange")
     soups = plan_soups(view)
     drawn = frame_soup(view, soups, kf.q, kf.X_WO).triangles[-len(view.inputs.mesh.faces):]
-    X = view.plan.object_poses["exchange"]
+    X = exchange_pose(view, kf)
     expected = view.inputs.mesh.triangles @ X[:3, :3].T + X[:3, 3]
     np.testing.assert_allclose(drawn, expected, atol=1e-4)
 
@@ -56,23 +79,26 @@ def test_the_sampled_motion_stops_at_every_waypoint(view):
 
 
 def test_the_object_rests_or_rides_with_the_holding_hand(view):
-    """Static while no hand holds it; fixed in the holding hand's grasp frame otherwise,
-    where the plan's grasp puts it."""
+    """At its placement while it rests; fixed in each holding hand's grasp frame otherwise,
+    where the plan's grasp (the one ``holding`` names) puts it."""
     motion = sample_motion(view, fps=10)
     robot = view.inputs.robot
     for k, phase in enumerate(view.plan.phases):
         rows = np.flatnonzero(motion.phase == k)
         X = motion.X_WO[rows]
         if not phase.holding:
-            np.testing.assert_allclose(X, np.broadcast_to(X[0], X.shape), atol=1e-12, err_msg=phase.name)
+            assert phase.placement is not None, phase.name
+            X_rest = view.plan.placement(phase.placement).X_WO
+            np.testing.assert_allclose(X, np.broadcast_to(X_rest, X.shape), atol=1e-12, err_msg=phase.name)
             continue
-        hand = phase.holding[0]
-        X_OG = view.plan.grasp(hand).X_OG
-        for r, X_WO in zip(rows, X):
-            X_GO = inverse(robot.fk(motion.q[r], robot.hands[hand].grasp_frame)) @ X_WO
-            dp, da = pose_error(X_GO, inverse(X_OG))
-            assert dp < 1e-3 and da < 1e-2, (phase.name, motion.t[r], dp, da)
-    carried = [k for k, p in enumerate(view.plan.phases) if p.name == "carry"][0]
+        for hand, gid in phase.holding.items():
+            X_OG = view.plan.grasp(gid).X_OG
+            assert view.plan.grasp(gid).hand == hand
+            for r, X_WO in zip(rows, X):
+                X_GO = inverse(robot.fk(motion.q[r], robot.hands[hand].grasp_frame)) @ X_WO
+                dp, da = pose_error(X_GO, inverse(X_OG))
+                assert dp < 1e-3 and da < 1e-2, (phase.name, hand, motion.t[r], dp, da)
+    carried = next(k for k, p in enumerate(view.plan.phases) if p.kind == Kind.TRANSFER)
     X = motion.X_WO[motion.phase == carried]
     assert np.linalg.norm(X[-1, :3, 3] - X[0, :3, 3]) > 0.05  # it really travels
 

@@ -9,6 +9,7 @@ from rich.console import Console
 from rich.table import Table
 
 from regrasp_cli.model.reach import Reach, reach
+from regrasp_cli.artefacts import _positive, build_options, roadmap_options
 from regrasp_cli.scene import Problem, load_problem
 
 
@@ -129,43 +130,6 @@ def provenance_table(file: Path, prov) -> Table:
     return t
 
 
-def _positive(value, name: str) -> None:
-    from regrasp_cli.errors import InputError
-
-    if value is not None and value < 1:
-        raise InputError(None, name, f"expected an integer >= 1, found {value}")
-
-
-def build_options(scene_seed: int, seed: int | None, jobs: int, positions: int | None, orientations: int | None,
-                  target: int | None = None, weights: str | None = None):
-    from dataclasses import replace
-
-    from regrasp_cli.grasp.build import BuildOptions
-
-    from regrasp_cli.errors import InputError
-
-    for value, name in ((jobs, "--jobs"), (positions, "--positions"), (orientations, "--orientations")):
-        _positive(value, name)
-    options = BuildOptions(seed=scene_seed if seed is None else seed, jobs=jobs)
-    g = options.grasp
-    if target is not None and target < 0:
-        raise InputError(None, "--target", f"expected an integer >= 0, found {target}")
-    g = replace(g, n_positions=positions or g.n_positions, n_orientations=orientations or g.n_orientations,
-                target=g.target if target is None else target)
-    if weights is not None:
-        from regrasp_cli.grasp.quality import QualityWeights
-
-        try:
-            w = [float(x) for x in weights.split(",")]
-        except ValueError:
-            w = []
-        if len(w) != 4 or any(not (x >= 0) for x in w) or sum(w) <= 0:
-            raise InputError(None, "--weights", f"expected four numbers >= 0 (not all 0) separated by commas, "
-                                                f"found {weights!r}")
-        g = replace(g, weights=QualityWeights(*w))
-    return replace(options, grasp=g)
-
-
 def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, jobs: int,
                      positions: int | None, orientations: int | None, target: int | None = None,
                      weights: str | None = None, console: Console | None = None) -> None:
@@ -247,15 +211,6 @@ def _hand_of(file: Path) -> str:
         return f.attrs["hand"]
 
 
-def roadmap_options(scene_spec, nodes: int, tree: bool, seed: int | None):
-    from regrasp_cli.errors import InputError
-    from regrasp_cli.roadmap.build import RoadmapOptions
-
-    if nodes < 1:
-        raise InputError(None, "--nodes", f"expected an integer >= 1, found {nodes}")
-    return RoadmapOptions(nodes=nodes, tree=tree, seed=scene_spec.planning.seed if seed is None else seed)
-
-
 def run_roadmap_build(scene: Path, cache_dir: Path, nodes: int, tree: bool, seed: int | None, jobs: int,
                       console: Console | None = None) -> None:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -315,3 +270,18 @@ def show_roadmap(file: Path, scene: Path | None, cache_dir: Path, console: Conso
     for k, v in summary(art).items():
         t.add_row(k, v)
     console.print(t)
+
+
+class CliBuilder:
+    """Builds a missing or stale artefact for `regrasp plan` with the progress bars and
+    summary tables of `regrasp grasps build` / `regrasp roadmap build`."""
+
+    def __init__(self, console: Console):
+        self.console = console
+
+    def grasps(self, scene: Path, cache_dir: Path, hand: str, options) -> None:
+        run_grasps_build(scene, cache_dir, hand, options.seed, options.jobs, None, None, options.grasp.target,
+                         console=self.console)
+
+    def roadmap(self, scene: Path, cache_dir: Path, options, jobs: int) -> None:
+        run_roadmap_build(scene, cache_dir, options.nodes, options.tree, options.seed, jobs, console=self.console)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from regrasp_cli.plan.exchange import exchange_position, grid_nodes, wrist_path_cost
+from regrasp_cli.manip.exchange import exchange_position, grid_nodes, wrist_path_cost
 
 
 def test_grid_nodes_cover_the_box():

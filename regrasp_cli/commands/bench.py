@@ -110,6 +110,7 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
     from regrasp_cli.bench.ompllog import scene_logs
     from regrasp_cli.bench.report import markdown, plot_png, print_tables
     from regrasp_cli.bench.runner import items_of, offline_stages, run_items
+    from regrasp_cli.commands.report import CliBuilder
 
     err = Console(stderr=True)
     where = "loky" if client is None else f"dask at {client.scheduler.address}"
@@ -120,7 +121,7 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
     plan_dir = out_dir / "plans"
     plan_dir.mkdir(parents=True, exist_ok=True)
 
-    offline = offline_stages(suite, cache_dir, jobs, err)
+    offline = offline_stages(suite, cache_dir, jobs, CliBuilder(err))
     items = items_of(suite, cache_dir, plan_dir)
     meta = {"machine": machine(), "suite": {"file": str(suite.file), "name": suite.name,
                                             "scenes": [str(s) for s in suite.scenes],

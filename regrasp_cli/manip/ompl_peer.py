@@ -1,14 +1,14 @@
 """A peer single-query planner: OMPL's RRT-Connect on the queries of §V-B (issue 6).
 
 The paper compares its roadmap planner with an RRT-Connect baseline (§VI).  To tell how
-much of that comparison comes from our own RRT-Connect (:mod:`regrasp_cli.roadmap.rrt`),
+much of that comparison comes from our own RRT-Connect (:mod:`regrasp_cli.motion.rrt`),
 ``ompl-rrtconnect`` hands the very same four queries to OMPL's ``geometric::RRTConnect``
 (the optional ``ompl`` extra, imported lazily) and changes nothing else:
 
 * the state space is the moving joints (torso, right arm, left arm) within their limits;
   every other joint keeps its value in ``a`` with the phase's finger values;
 * the metric is ours: a coordinate of the state is a joint value times the square root of
-  its weight, so OMPL's Euclidean distance *is* :func:`regrasp_cli.roadmap.local.distance`
+  its weight, so OMPL's Euclidean distance *is* :func:`regrasp_cli.motion.local.distance`
   and its ``range`` is our RRT step (``options.rrt.step``) in the same units;
 * states are checked with ``worlds.full.is_free`` and motions with OUR certified dense
   segment check (``scratch.segment_free``) through a ``MotionValidator`` subclass, so
@@ -32,8 +32,8 @@ from importlib import metadata
 import numpy as np
 
 from regrasp_cli.errors import InputError
-from regrasp_cli.plan.context import Scratch
-from regrasp_cli.plan.queries import PhaseWorlds, QueryFailed, QueryStats, _with_fingers, smooth
+from regrasp_cli.manip.context import Scratch
+from regrasp_cli.manip.queries import PhaseWorlds, QueryFailed, QueryStats, _with_fingers, smooth
 
 MOVING_GROUPS = ("torso", "right_arm", "left_arm")
 MISSING = "ompl-rrtconnect needs the optional extra: pip install 'regrasp[ompl]'"
@@ -54,7 +54,42 @@ def ompl_version() -> str:
     return metadata.version("ompl")
 
 
-def ompl_query(scratch: Scratch, a: np.ndarray, b: np.ndarray, worlds: PhaseWorlds, weights: np.ndarray,
+def _space_information(ob, scratch: Scratch, worlds: PhaseWorlds, lower: np.ndarray, upper: np.ndarray, to_q):
+    """OMPL's space (the scaled moving joints within ``lower``..``upper``) with our
+    collision checks: the validity of a state, and of a motion by our certified dense
+    segment check."""
+    n = len(lower)
+    space = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    for i, (lo, hi) in enumerate(zip(lower, upper)):
+        bounds.setLow(i, float(lo))
+        bounds.setHigh(i, float(hi))
+    space.setBounds(bounds)
+    si = ob.SpaceInformation(space)
+    si.setStateValidityChecker(lambda s: worlds.full.is_free(to_q(s)))
+
+    class SegmentValidator(ob.MotionValidator):
+        def checkMotion(self, s0, s1) -> bool:  # noqa: N802 (OMPL's name)
+            return scratch.segment_free(worlds.full, to_q(s0), to_q(s1))
+
+    si.setMotionValidator(SegmentValidator(si))
+    si.setup()
+    return si
+
+
+def _exact_ends(scratch: Scratch, worlds: PhaseWorlds, path: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
+    """The path's ends set to a and b exactly (not through the scaling, ~1e-16 off; b
+    with its own non-moving joints): a segment next to an end is checked again only if
+    that moved it noticeably.  Raises QueryFailed when that segment collides."""
+    for end, q, near in ((0, a, 1), (-1, b, -2)):
+        moved = float(np.abs(path[end] - q).max()) > 1e-9
+        path[end] = q
+        if moved and len(path) > 1 and not scratch.segment_free(worlds.full, path[near], q):
+            raise QueryFailed("OMPL RRT-Connect's path reaches its end through a collision (the non-moving "
+                              "joints differ between the ends)")
+
+
+def ompl_query(scratch: Scratch, rng: np.random.Generator, a: np.ndarray, b: np.ndarray, worlds: PhaseWorlds, weights: np.ndarray,
                stats: QueryStats) -> np.ndarray:
     """A collision-free path (k, nq) from a to b (both free in ``worlds.full``), found by
     OMPL's RRT-Connect and shortcut; the contract of :func:`queries.rrt_query`.
@@ -76,28 +111,11 @@ def ompl_query(scratch: Scratch, a: np.ndarray, b: np.ndarray, worlds: PhaseWorl
         q[moving] = np.fromiter((state[i] for i in range(n)), float, n) / scale
         return q
 
-    space = ob.RealVectorStateSpace(n)
-    bounds = ob.RealVectorBounds(n)
-    for i, (lo, hi) in enumerate(zip(robot.lower[moving] * scale, robot.upper[moving] * scale)):
-        bounds.setLow(i, float(lo))
-        bounds.setHigh(i, float(hi))
-    space.setBounds(bounds)
-    si = ob.SpaceInformation(space)
-    si.setStateValidityChecker(lambda s: worlds.full.is_free(to_q(s)))
-
-    class SegmentValidator(ob.MotionValidator):
-        """OMPL's motion check delegated to our certified dense segment check."""
-
-        def checkMotion(self, s0, s1) -> bool:  # noqa: N802 (OMPL's name)
-            return scratch.segment_free(worlds.full, to_q(s0), to_q(s1))
-
-    validator = SegmentValidator(si)
-    si.setMotionValidator(validator)
-    si.setup()
+    si = _space_information(ob, scratch, worlds, robot.lower[moving] * scale, robot.upper[moving] * scale, to_q)
 
     level = ou.getLogLevel()
     ou.setLogLevel(ou.LOG_NONE)  # reseeding after the first query logs an error, yet takes effect
-    ou.RNG.setSeed(int(scratch.rng.integers(1, 2**31 - 1)))  # 0 is refused
+    ou.RNG.setSeed(int(rng.integers(1, 2**31 - 1)))  # 0 is refused
     ou.setLogLevel(ou.LOG_WARN)
     try:
         setup = og.SimpleSetup(si)
@@ -129,15 +147,11 @@ def ompl_query(scratch: Scratch, a: np.ndarray, b: np.ndarray, worlds: PhaseWorl
         path = np.array([to_q(solution.getState(i)) for i in range(solution.getStateCount())])
     finally:
         ou.setLogLevel(level)
-    # the ends exactly (not through the scaling, ~1e-16 off), b with its own non-moving
-    # joints: a segment next to an end is checked again only if that moved it noticeably
-    for end, q, near in ((0, a, 1), (-1, b, -2)):
-        moved = float(np.abs(path[end] - q).max()) > 1e-9
-        path[end] = q
-        if moved and len(path) > 1 and not scratch.segment_free(worlds.full, path[near], q):
-            stats.planning += time.perf_counter() - t0
-            raise QueryFailed("OMPL RRT-Connect's path reaches its end through a collision (the non-moving "
-                              "joints differ between the ends)")
-    path = smooth(scratch, path, worlds.full, weights)
+    try:
+        _exact_ends(scratch, worlds, path, a, b)
+    finally:
+        stats.planning += time.perf_counter() - t0
+    t0 = time.perf_counter()
+    path = smooth(scratch, rng, path, worlds.full, weights)
     stats.planning += time.perf_counter() - t0
     return path

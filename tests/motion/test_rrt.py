@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from regrasp_cli.roadmap.rrt import RRTOptions, path_length, rrt_connect, shortcut
+from regrasp_cli.motion.rrt import RRTOptions, path_length, rrt_connect, shortcut
 
 
 def euclid(q, qs):

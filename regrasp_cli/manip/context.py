@@ -2,13 +2,13 @@
 
 The problem, the grasp lists and the roadmap are immutable inputs; a :class:`Scratch` is
 built for one `regrasp plan` run and holds what the run learns: collision worlds (built
-once per attachment of the object, ~35 ms each, and moved to each placement), the random
-generator and check counters.
+once per attachment of the object, ~35 ms each, and moved to each placement) and check
+counters.  Random generators are arguments of the functions that draw, never kept here.
 
 Segments that the roadmap did not certify (connections to key configurations, repairs,
 escape trees, approach lines, finger motions) are checked densely: no joint moves more than
 ``resolution`` and no robot (or held-object) point more than ``cartesian_step`` between two
-checked configurations (the Cartesian bound of :class:`roadmap.local.LocalPlanner`).
+checked configurations (the Cartesian bound of :class:`motion.local.LocalPlanner`).
 
 The worlds of the four queries are *certified* (``certify``): every pair except a hand's
 own links keeps ``cartesian_step / 2`` of clearance (a coal security margin) at the checked
@@ -27,10 +27,10 @@ import numpy as np
 
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
 from regrasp_cli.model.ik import IKOptions
-from regrasp_cli.plan.handshape import palm_and_finger_links
+from regrasp_cli.manip.handshape import palm_and_finger_links
 from regrasp_cli.roadmap.compose import margin_rule
-from regrasp_cli.roadmap.local import LocalPlanner, held_reach, joint_reach
-from regrasp_cli.roadmap.rrt import RRTOptions
+from regrasp_cli.motion.local import LocalPlanner, held_reach, joint_reach
+from regrasp_cli.motion.rrt import RRTOptions
 from regrasp_cli.scene import Problem
 
 
@@ -76,7 +76,6 @@ class Scratch:
 
     problem: Problem
     options: OnlineOptions
-    rng: np.random.Generator
     worlds: dict = field(default_factory=dict)
     local: LocalPlanner | None = None
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.model.ik import IKOptions, arm_ik, solve_pose
-from regrasp_cli.plan.context import Scratch
+from regrasp_cli.manip.context import Scratch
 from regrasp_cli.spatial import inverse
 
 OTHER = {"right": "left", "left": "right"}
@@ -126,7 +126,7 @@ def _translated(X: np.ndarray, d: np.ndarray) -> np.ndarray:
     return Y
 
 
-def cartesian_line(scratch: Scratch, hand: str, q_end: np.ndarray, X_far: np.ndarray, steps: int) -> np.ndarray | None:
+def cartesian_line(scratch: Scratch, rng: np.random.Generator, hand: str, q_end: np.ndarray, X_far: np.ndarray, steps: int) -> np.ndarray | None:
     """Waypoints (steps + 1, nq) moving the hand's grasp frame on a straight line from
     X_far (orientation kept) to where it is at ``q_end``; only the arm moves.  None when
     IK fails or the arm would jump (a branch change)."""
@@ -138,7 +138,7 @@ def cartesian_line(scratch: Scratch, hand: str, q_end: np.ndarray, X_far: np.nda
     for i in range(1, steps + 1):
         X = X_end.copy()
         X[:3, 3] = X_end[:3, 3] + (X_far[:3, 3] - X_end[:3, 3]) * (i / steps)
-        res = solve_pose(robot, h.grasp_frame, X, q, h.arm_idx, scratch.rng, opts)
+        res = solve_pose(robot, h.grasp_frame, X, q, h.arm_idx, rng, opts)
         if not res.success or np.max(np.abs(res.q - q)) > 0.6:
             return None
         q = res.q
@@ -158,7 +158,7 @@ def preshapes(scratch: Scratch, hand: str, closed: np.ndarray) -> list[np.ndarra
     return [closed + a * (open_ - closed) for a in scratch.options.preshape]
 
 
-def _approach(scratch: Scratch, hand: str, q_pre: np.ndarray, centre_W: np.ndarray, world,
+def _approach(scratch: Scratch, rng: np.random.Generator, hand: str, q_pre: np.ndarray, centre_W: np.ndarray, world,
               directions_extra: tuple[np.ndarray, ...] = ()) -> np.ndarray | None:
     """Approach waypoints ending at ``q_pre`` (hand at the grasp pose, fingers pre-shaped),
     starting with the fingers open ``approach_distance`` away; checked in ``world``, the
@@ -173,7 +173,7 @@ def _approach(scratch: Scratch, hand: str, q_pre: np.ndarray, centre_W: np.ndarr
         n = np.linalg.norm(d)
         if n < 1e-9:
             continue
-        line = cartesian_line(scratch, hand, q_pre, _translated(X_WG, o.approach_distance * d / n), o.line_steps)
+        line = cartesian_line(scratch, rng, hand, q_pre, _translated(X_WG, o.approach_distance * d / n), o.line_steps)
         if line is None or not scratch.path_free(world, line):
             continue
         q_open = with_fingers(scratch, line[0], hand, h.open)
@@ -186,7 +186,7 @@ def _approach(scratch: Scratch, hand: str, q_pre: np.ndarray, centre_W: np.ndarr
     return None
 
 
-def _sample_base(scratch: Scratch, s: int, moving: np.ndarray) -> np.ndarray:
+def _sample_base(scratch: Scratch, rng: np.random.Generator, s: int, moving: np.ndarray) -> np.ndarray:
     """Rest configuration with open hands (s == 0), else with the joints ``moving`` drawn
     around rest (Gaussian, clipped to the limits)."""
     robot = scratch.problem.robot
@@ -194,7 +194,7 @@ def _sample_base(scratch: Scratch, s: int, moving: np.ndarray) -> np.ndarray:
     for h in robot.hands.values():
         q[h.idx] = h.open
     if s:
-        q[moving] = np.clip(q[moving] + scratch.rng.normal(0.0, scratch.options.sample_sigma, len(moving)),
+        q[moving] = np.clip(q[moving] + rng.normal(0.0, scratch.options.sample_sigma, len(moving)),
                             robot.lower[moving], robot.upper[moving])
     return q
 
@@ -202,7 +202,7 @@ def _sample_base(scratch: Scratch, s: int, moving: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ single grasps
 
 
-def single_configuration(scratch: Scratch, grasps: GraspList, k: int, X_WO: np.ndarray) -> SingleConfig | None:
+def single_configuration(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: int, X_WO: np.ndarray) -> SingleConfig | None:
     """A collision-free configuration grasping the object at X_WO (resting on its support)
     with grasp ``k`` of the hand's list, with its approach and lift lines; None when the
     samples are exhausted."""
@@ -215,10 +215,10 @@ def single_configuration(scratch: Scratch, grasps: GraspList, k: int, X_WO: np.n
     centre = X_WO[:3, :3] @ p.object.mesh.centroid + X_WO[:3, 3]
     moving = np.concatenate([robot.groups["torso"], robot.hands[OTHER[hand]].arm_idx])
     for s in range(o.key_samples):
-        base = _sample_base(scratch, s, moving)
+        base = _sample_base(scratch, rng, s, moving)
         if not w_free.is_free(base):
             continue
-        ik = arm_ik(robot, hand, X_WG, base, scratch.rng, options=o.ik)
+        ik = arm_ik(robot, hand, X_WG, base, rng, options=o.ik)
         if not ik.success:
             continue
         q_closed = with_fingers(scratch, ik.q, hand, grasps.finger_q[k])
@@ -228,14 +228,14 @@ def single_configuration(scratch: Scratch, grasps: GraspList, k: int, X_WO: np.n
                       if w_free.is_free(q) and scratch.segment_free(w_touch, q, q_closed)), None)
         if q_pre is None:
             continue
-        lift = cartesian_line(scratch, hand, q_closed, _translated(X_WG, np.array([0, 0, o.lift_height])), o.line_steps)
+        lift = cartesian_line(scratch, rng, hand, q_closed, _translated(X_WG, np.array([0, 0, o.lift_height])), o.line_steps)
         if lift is None:
             continue
         lift = lift[::-1]
         w_held = scratch.world(inverse(X_OG), attached=hand, touching=(hand,))
         if not scratch.path_free(w_held, lift) or not scratch.certified(w_held).is_free(lift[-1]):
             continue  # the top of the lift is a query's end: it keeps the queries' clearance
-        approach = _approach(scratch, hand, q_pre, centre, w_free, (np.array([0.0, 0.0, 1.0]),))
+        approach = _approach(scratch, rng, hand, q_pre, centre, w_free, (np.array([0.0, 0.0, 1.0]),))
         if approach is None:
             continue
         a_W = X_WG[:3, :3] @ approach_axis(scratch, hand)
@@ -248,7 +248,7 @@ def single_configuration(scratch: Scratch, grasps: GraspList, k: int, X_WO: np.n
 # ------------------------------------------------------------------ exchange
 
 
-def exchange_configuration(scratch: Scratch, giver: GraspList, kg: int, taker: GraspList, kt: int,
+def exchange_configuration(scratch: Scratch, rng: np.random.Generator, giver: GraspList, kg: int, taker: GraspList, kt: int,
                            X_WO: np.ndarray) -> ExchangeConfig | None:
     """Both hands on the object at X_WO (grasp ``kg`` of the giving hand, which holds it,
     ``kt`` of the taking hand): the hand-over of §V-B with its approach and retreat; None
@@ -265,11 +265,11 @@ def exchange_configuration(scratch: Scratch, giver: GraspList, kg: int, taker: G
     centre = X_WO[:3, :3] @ p.object.mesh.centroid + X_WO[:3, 3]
     torso = robot.groups["torso"]
     for s in range(o.key_samples):
-        base = _sample_base(scratch, s, torso)
-        ik_g = arm_ik(robot, g, X_WO @ X_OGg, base, scratch.rng, options=o.ik)
+        base = _sample_base(scratch, rng, s, torso)
+        ik_g = arm_ik(robot, g, X_WO @ X_OGg, base, rng, options=o.ik)
         if not ik_g.success:
             continue
-        ik_t = arm_ik(robot, t, X_WO @ X_OGt, ik_g.q, scratch.rng, options=o.ik)
+        ik_t = arm_ik(robot, t, X_WO @ X_OGt, ik_g.q, rng, options=o.ik)
         if not ik_t.success:
             continue
         q_both = with_fingers(scratch, with_fingers(scratch, ik_t.q, g, fg), t, ft)
@@ -283,10 +283,10 @@ def exchange_configuration(scratch: Scratch, giver: GraspList, kg: int, taker: G
                        if w_t.is_free(q) and scratch.segment_free(w_tg, q_both, q)), None)
         if q_gpre is None:
             continue
-        approach = _approach(scratch, t, q_tpre, centre, w_g)
+        approach = _approach(scratch, rng, t, q_tpre, centre, w_g)
         if approach is None:
             continue
-        retreat = _approach(scratch, g, q_gpre, centre, w_t)
+        retreat = _approach(scratch, rng, g, q_gpre, centre, w_t)
         if retreat is None:
             continue
         return ExchangeConfig(X_WO, approach, q_both, q_gpre, retreat[::-1])

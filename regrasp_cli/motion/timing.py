@@ -2,7 +2,7 @@
 
 A planned path is a list of waypoints ``(n, d)`` in the robot's joint order (rad, or m for
 prismatic joints) joined by straight segments in joint space, the local paths of the
-roadmaps (:mod:`regrasp_cli.roadmap.local`).  This module gives it timing that respects
+roadmaps (:mod:`regrasp_cli.motion.local`).  This module gives it timing that respects
 per-joint velocity limits ``v_max`` (d,) (rad/s or m/s) and acceleration limits ``a_max``
 (d,) (rad/s^2 or m/s^2).
 

@@ -27,11 +27,11 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
-from regrasp_cli.plan.context import Placed, Scratch
+from regrasp_cli.manip.context import Placed, Scratch
 from regrasp_cli.roadmap.build import RoadmapArtefact
-from regrasp_cli.roadmap.local import distance
+from regrasp_cli.motion.local import distance
 from regrasp_cli.roadmap.query import QueryMemo, shortest_path
-from regrasp_cli.roadmap.rrt import rrt_connect, shortcut
+from regrasp_cli.motion.rrt import rrt_connect, shortcut
 
 
 @dataclass
@@ -97,16 +97,16 @@ def _with_fingers(scratch: Scratch, q: np.ndarray, fingers: dict) -> np.ndarray:
     return q
 
 
-def _rrt(scratch: Scratch, a: np.ndarray, b: np.ndarray, world: Placed, fingers: dict,
+def _rrt(scratch: Scratch, rng: np.random.Generator, a: np.ndarray, b: np.ndarray, world: Placed, fingers: dict,
          weights: np.ndarray) -> tuple[np.ndarray | None, int]:
     robot = scratch.problem.robot
     moving = np.concatenate([robot.groups["torso"], robot.groups["right_arm"], robot.groups["left_arm"]])
 
     def sample():
-        return _with_fingers(scratch, robot.sample(scratch.rng, moving, base=a), fingers)
+        return _with_fingers(scratch, robot.sample(rng, moving, base=a), fingers)
 
     res = rrt_connect(a, b, sample, lambda x, y: scratch.segment_free(world, x, y),
-                      lambda x, ys: distance(x, ys, weights), scratch.rng, scratch.options.rrt)
+                      lambda x, ys: distance(x, ys, weights), rng, scratch.options.rrt)
     return res.path, res.nodes
 
 
@@ -123,7 +123,7 @@ def _detours(scratch: Scratch, q: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: Placed, fingers: dict, node_free, q_of,
+def _escape(scratch: Scratch, rng: np.random.Generator, rm: Roadmap, q: np.ndarray, world: Placed, fingers: dict, node_free, q_of,
             stats: QueryStats) -> tuple[list[np.ndarray], list[tuple[int, float]]]:
     """Grow a random tree from q until one of its nodes joins a free Super Graph node:
     the RRT-like local reconnection of §V-B for a configuration in a pocket of the free
@@ -132,10 +132,10 @@ def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: Placed, fingers
     moving = np.concatenate([robot.groups["torso"], robot.groups["right_arm"], robot.groups["left_arm"]])
     nodes, parent = [q], [-1]
     for _ in range(o.escape_iterations):
-        if scratch.rng.random() < 0.3:  # towards a random roadmap node
-            target = q_of(int(rm.giant[scratch.rng.integers(len(rm.giant))]))
+        if rng.random() < 0.3:  # towards a random roadmap node
+            target = q_of(int(rm.giant[rng.integers(len(rm.giant))]))
         else:
-            target = _with_fingers(scratch, robot.sample(scratch.rng, moving, base=q), fingers)
+            target = _with_fingers(scratch, robot.sample(rng, moving, base=q), fingers)
         d = distance(target, np.asarray(nodes), rm.weights)
         i = int(np.argmin(d))
         step = o.rrt.step / max(float(d[i]), 1e-12)
@@ -158,119 +158,130 @@ def _escape(scratch: Scratch, rm: Roadmap, q: np.ndarray, world: Placed, fingers
     return [], []
 
 
-def smooth(scratch: Scratch, path: np.ndarray, world: Placed, weights: np.ndarray) -> np.ndarray:
+def smooth(scratch: Scratch, rng: np.random.Generator, path: np.ndarray, world: Placed, weights: np.ndarray) -> np.ndarray:
     return shortcut(path, lambda x, y: scratch.segment_free(world, x, y), lambda x, y: distance(x, y, weights),
-                    scratch.rng, scratch.options.shortcut_iterations)
+                    rng, scratch.options.shortcut_iterations)
 
 
-def rrt_query(scratch: Scratch, a: np.ndarray, b: np.ndarray, worlds: PhaseWorlds, weights: np.ndarray,
+def rrt_query(scratch: Scratch, rng: np.random.Generator, a: np.ndarray, b: np.ndarray, worlds: PhaseWorlds, weights: np.ndarray,
               stats: QueryStats) -> np.ndarray:
     """The single-query baseline: RRT-Connect from a to b, then shortcut."""
     t0 = time.perf_counter()
-    path, n = _rrt(scratch, a, b, worlds.full, worlds.fingers, weights)
+    path, n = _rrt(scratch, rng, a, b, worlds.full, worlds.fingers, weights)
     stats.rrt_calls += 1
     stats.nodes += n
     if path is None:
         stats.planning += time.perf_counter() - t0
         raise QueryFailed(f"RRT-Connect found no path within its budget of {scratch.options.rrt.max_iterations} "
                           "iterations")
-    path = smooth(scratch, path, worlds.full, weights)
+    path = smooth(scratch, rng, path, worlds.full, weights)
     stats.planning += time.perf_counter() - t0
     return path
 
 
-def roadmap_query(scratch: Scratch, rm: Roadmap, a: np.ndarray, b: np.ndarray, worlds: PhaseWorlds,
-                  stats: QueryStats) -> np.ndarray:
-    """A collision-free path (k, nq) from a to b (both free in ``worlds.full``)."""
-    o = scratch.options
-    t_start = time.perf_counter()
-    validation = 0.0
-    full, lazy = worlds.full, worlds.lazy
-    if scratch.segment_free(full, a, b):
-        stats.planning += time.perf_counter() - t_start
-        return np.array([a, b])
-    memo = QueryMemo()
-    node = {}  # node index -> configuration with the phase's fingers
+class _LazyView:
+    """One query's view of the Super Graph: its nodes with the phase's finger values, and
+    the memo of what the lazy checks found, kept beside the graph (never in it)."""
 
-    def q_of(i: int) -> np.ndarray:
-        if i not in node:
-            node[i] = _with_fingers(scratch, rm.nodes[i], worlds.fingers)
-        return node[i]
+    def __init__(self, scratch: Scratch, rm: Roadmap, worlds: PhaseWorlds):
+        self.scratch, self.rm, self.worlds = scratch, rm, worlds
+        self.memo, self.node, self.validation = QueryMemo(), {}, 0.0
 
-    def node_free(i: int) -> bool:
-        nonlocal validation
-        if i in memo.invalid_nodes:
+    def q_of(self, i: int) -> np.ndarray:
+        if i not in self.node:
+            self.node[i] = _with_fingers(self.scratch, self.rm.nodes[i], self.worlds.fingers)
+        return self.node[i]
+
+    def node_free(self, i: int) -> bool:
+        if i in self.memo.invalid_nodes:
             return False
         t = time.perf_counter()
-        ok = lazy.is_free(q_of(i))
-        validation += time.perf_counter() - t
+        ok = self.worlds.lazy.is_free(self.q_of(i))
+        self.validation += time.perf_counter() - t
         if not ok:
-            memo.invalid_nodes.add(i)
+            self.memo.invalid_nodes.add(i)
         return ok
 
-    def ends(q: np.ndarray) -> list[tuple[int, float]]:
-        # nodes of the largest component only: ends joined to two different components
-        # have no path between them (the Super Graph has ~170 components, one of ~86 %)
+    def ends(self, q: np.ndarray) -> list[tuple[int, float]]:
+        """Free nodes q joins with a free segment, nearest first, ``connections`` at most.
+        Nodes of the largest component only: ends joined to two different components
+        have no path between them (the Super Graph has ~170 components, one of ~86 %)."""
+        rm, o = self.rm, self.scratch.options
         d = np.full(len(rm.nodes), np.inf)
         d[rm.giant] = distance(q, rm.nodes[rm.giant], rm.weights)
         out = []
         for i in np.argsort(d, kind="stable")[:min(o.k_connect, len(rm.giant))]:
             i = int(i)
-            if node_free(i) and scratch.segment_free(full, q, q_of(i)):
+            if self.node_free(i) and self.scratch.segment_free(self.worlds.full, q, self.q_of(i)):
                 out.append((i, float(d[i])))
                 if len(out) >= o.connections:
                     break
         return out
 
-    def attach(q: np.ndarray) -> tuple[list[np.ndarray], list[tuple[int, float]]]:
+    def attach(self, rng: np.random.Generator, q: np.ndarray,
+               stats: QueryStats) -> tuple[list[np.ndarray], list[tuple[int, float]]]:
         """Configurations leading from q to the graph, and the nodes they join."""
-        e = ends(q)
+        full = self.worlds.full
+        e = self.ends(q)
         if e:
             return [], e
-        for mid in _detours(scratch, q):  # e.g. the hand that just let go back at rest
-            if full.is_free(mid) and scratch.segment_free(full, q, mid):
-                e = ends(mid)
+        for mid in _detours(self.scratch, q):  # e.g. the hand that just let go back at rest
+            if full.is_free(mid) and self.scratch.segment_free(full, q, mid):
+                e = self.ends(mid)
                 if e:
                     return [mid], e
-        return _escape(scratch, rm, q, full, worlds.fingers, node_free, q_of, stats)
+        return _escape(self.scratch, rng, self.rm, q, full, self.worlds.fingers, self.node_free, self.q_of, stats)
 
-    (pre_a, src), (pre_b, dst) = attach(a), attach(b)
+    def first_invalid_edge(self, ids: list[int], stats: QueryStats) -> tuple[int, int] | None:
+        """Check the path's edges in order against what the roadmap did not; the first
+        invalid one is hidden (memo) and returned."""
+        for u, v in zip(ids[:-1], ids[1:]):
+            e = frozenset((u, v))
+            if e in self.memo.valid_edges:
+                continue
+            t = time.perf_counter()
+            ok = self.node_free(u) and self.node_free(v) and self.scratch.segment_free(
+                self.worlds.lazy, self.q_of(u), self.q_of(v))
+            self.validation += time.perf_counter() - t
+            if ok:
+                self.memo.valid_edges.add(e)
+            else:
+                self.memo.invalid_edges.add(e)
+                stats.invalid_edges += 1
+                return u, v
+        return None
+
+
+def roadmap_query(scratch: Scratch, rng: np.random.Generator, rm: Roadmap, a: np.ndarray, b: np.ndarray,
+                  worlds: PhaseWorlds, stats: QueryStats) -> np.ndarray:
+    """A collision-free path (k, nq) from a to b (both free in ``worlds.full``)."""
+    o = scratch.options
+    t_start = time.perf_counter()
+    if scratch.segment_free(worlds.full, a, b):
+        stats.planning += time.perf_counter() - t_start
+        return np.array([a, b])
+    view = _LazyView(scratch, rm, worlds)
+    (pre_a, src), (pre_b, dst) = view.attach(rng, a, stats), view.attach(rng, b, stats)
     path = None
     for _ in range(o.repairs):
         stats.searches += 1
-        ids = rm.shortest_path(src, dst, memo) if src and dst else None
+        ids = rm.shortest_path(src, dst, view.memo) if src and dst else None
         if ids is None:
             break
-        bad = None
-        for u, v in zip(ids[:-1], ids[1:]):
-            e = frozenset((u, v))
-            if e in memo.valid_edges:
-                continue
-            t = time.perf_counter()
-            ok = node_free(u) and node_free(v) and scratch.segment_free(lazy, q_of(u), q_of(v))
-            validation += time.perf_counter() - t
-            if ok:
-                memo.valid_edges.add(e)
-            else:
-                memo.invalid_edges.add(e)
-                stats.invalid_edges += 1
-                bad = (u, v)
-                break
-        if bad is None:
-            path = np.array([a, *pre_a] + [q_of(i) for i in ids] + [*pre_b[::-1], b])
+        if view.first_invalid_edge(ids, stats) is None:
+            path = np.array([a, *pre_a] + [view.q_of(i) for i in ids] + [*pre_b[::-1], b])
             stats.nodes += len(ids)
             break
     if path is None:  # bridge with RRT-Connect between the ends (different components)
-        bridge, n = _rrt(scratch, a, b, full, worlds.fingers, rm.weights)
+        path, n = _rrt(scratch, rng, a, b, worlds.full, worlds.fingers, rm.weights)
         stats.rrt_calls += 1
         stats.nodes += n
-        if bridge is None:
-            stats.planning += time.perf_counter() - t_start - validation
-            stats.validation += validation
+        if path is None:
+            stats.planning += time.perf_counter() - t_start - view.validation
+            stats.validation += view.validation
             raise QueryFailed(f"no path in the roadmap after {stats.searches} searches, and RRT-Connect found none "
                               f"within its budget of {o.rrt.max_iterations} iterations")
-        path = bridge
-    path = smooth(scratch, path, full, rm.weights)
-    stats.planning += time.perf_counter() - t_start - validation
-    stats.validation += validation
+    path = smooth(scratch, rng, path, worlds.full, rm.weights)
+    stats.planning += time.perf_counter() - t_start - view.validation
+    stats.validation += view.validation
     return path

@@ -1,4 +1,4 @@
-"""Time parameterisation of piecewise-linear joint paths (regrasp_cli.plan.timing):
+"""Time parameterisation of piecewise-linear joint paths (regrasp_cli.motion.timing):
 hand-computed trapezoid and triangle, the limiting joint, the limits and the path on
 sampled trajectories, rest and exact positions at the waypoints, zero-length segments,
 longer given durations, and input validation."""
@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from regrasp_cli.plan.timing import (
+from regrasp_cli.motion.timing import (
     evaluate_trajectory,
     sample_trajectory,
     scaling_limits,

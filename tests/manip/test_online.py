@@ -6,8 +6,9 @@ scene with small grasp lists built once per session (shared with tests/test_cli_
 * key configurations: a single grasp (pose, collisions, approach, lift) and the straight
   Cartesian lines they are made of;
 * exchange: the orientation from the grasp directions, the exchange pose on the grid;
-* the planner's failures, each at its own stage with its reason, and its independence of
-  the number of worker processes;
+* the hand-over task's failures (:func:`handover.plan`), each at its own
+  :class:`~regrasp_cli.manip.status.Stage` with its reason, and its independence of the
+  number of worker processes;
 * a roadmap query on a hand-made three-node Super Graph whose short edge the object blocks.
 
 Collision checks of results use worlds built here from the Problem and the plan checker's
@@ -27,17 +28,21 @@ from scipy.spatial.transform import Rotation
 from regrasp_cli.grasp.build import BuildOptions, GraspList, load_or_build
 from regrasp_cli.grasp.single import GraspOptions
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, mesh_geometry, obstacle_geometry
-from regrasp_cli.plan.context import OnlineOptions, Scratch
-from regrasp_cli.plan.doublegrasp import cheap_order, double_grasps, environment_free, single_configurations
-from regrasp_cli.plan.exchange import exchange_orientation, grid_nodes, wrist_path_cost
-from regrasp_cli.plan.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, hands_collide, \
+from regrasp_cli.manip.context import OnlineOptions, Scratch
+from regrasp_cli.manip.doublegrasp import cheap_order, double_grasps, environment_free, single_configurations
+from regrasp_cli.manip.exchange import exchange_orientation, grid_nodes, wrist_path_cost
+from regrasp_cli.manip.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, hands_collide, \
     static_geometry
-from regrasp_cli.plan.keyconf import SingleConfig, approach_axis, cartesian_line, preshapes, shoulder, \
+from regrasp_cli.manip.keyconf import SingleConfig, approach_axis, cartesian_line, preshapes, shoulder, \
     single_configuration, wrist
-from regrasp_cli.plan.planner import _object_shape, exchange_pose, phase_worlds, run
-from regrasp_cli.plan.queries import QueryStats, Roadmap, roadmap_query
-from regrasp_cli.roadmap.local import distance, joint_reach, joint_weights
-from regrasp_cli.roadmap.rrt import RRTOptions
+from regrasp_cli.manip.modes import Kind
+from regrasp_cli.manip.queries import QueryStats, Roadmap, roadmap_query
+from regrasp_cli.manip.solve import TransitionStats
+from regrasp_cli.manip.status import Stage
+from regrasp_cli.manip.tasks import handover
+from regrasp_cli.manip.tasks.handover import TRANSITIONS, _object_shape, exchange_pose, grasp_id, phase_worlds, plan
+from regrasp_cli.motion.local import distance, joint_reach, joint_weights
+from regrasp_cli.motion.rrt import RRTOptions
 from regrasp_cli.spatial import inverse, pose_error, rotation_angle
 from regrasp_cli.trajectory import Phase
 from regrasp_cli.validate import collision_issues
@@ -46,7 +51,7 @@ ROOT = Path(__file__).resolve().parents[2]
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
 GRASP_TARGET = 20  # grasps per hand: small lists (~3 s per hand), as `plan --grasp-target 20`
 POSE_TOL = (0.001, 0.01)  # m, rad
-QUERIES = ("grasp", "carry", "place", "rest")
+QUERIES = ("grasp", "carry", "place", "rest")  # the hand-over's transit and transfer queries, in plan order
 
 
 # ------------------------------------------------------------------ fixtures and helpers
@@ -74,8 +79,12 @@ def obstacle(problem, name: str):
     return next(o for o in problem.spec.obstacles if o.name == name)
 
 
-def new_scratch(problem, seed: int = 0, **options) -> Scratch:
-    return Scratch(problem, OnlineOptions(**options), np.random.default_rng(seed))
+def new_scratch(problem, **options) -> Scratch:
+    return Scratch(problem, OnlineOptions(**options))
+
+
+def test_the_task_spells_the_four_queries_in_plan_order():
+    assert TRANSITIONS == QUERIES
 
 
 def _tf(X: np.ndarray) -> coal.Transform3s:
@@ -105,7 +114,7 @@ def translated(X: np.ndarray, d) -> np.ndarray:
 
 def path_collisions(world: CollisionWorld, path: np.ndarray, problem) -> list:
     """Issues of the plan checker's dense collision test along ``path`` (k, nq)."""
-    phase = Phase("test", (), (), np.asarray(path), np.zeros(len(path)))
+    phase = Phase("test", Kind.TRANSIT, {}, (), None, np.asarray(path), np.zeros(len(path)))
     issues, _ = collision_issues(phase, world, joint_reach(problem.robot), 0.01, 0.005)
     return issues
 
@@ -193,10 +202,10 @@ def test_environment_filter_drops_the_grasps_that_hit_the_desk(problem, lists, e
 def single(problem, lists, shapes, env) -> tuple[Scratch, SingleConfig]:
     """The first single-grasp configuration of the right hand at the object's start pose,
     in the planner's order."""
-    scratch = new_scratch(problem)
+    scratch, rng = new_scratch(problem), np.random.default_rng(0)
     g, X_WO = lists["right"], problem.spec.task.X_WO_start
     for k in cheap_order(scratch, g, environment_free(g, shapes["right"], X_WO, env), X_WO)[:10]:
-        c = single_configuration(scratch, g, int(k), X_WO)
+        c = single_configuration(scratch, rng, g, int(k), X_WO)
         if c is not None:
             return scratch, c
     pytest.fail("no single-grasp configuration among the 10 best right-hand grasps at the start pose")
@@ -260,7 +269,7 @@ def test_cartesian_line_moves_the_grasp_frame_on_a_straight_line(problem, single
     X_end = robot.fk(c.q_closed, h.grasp_frame)
     X_far = translated(X_end, [0.05, -0.03, 0.08])
     steps = 4
-    line = cartesian_line(scratch, "right", c.q_closed, X_far, steps)
+    line = cartesian_line(scratch, np.random.default_rng(0), "right", c.q_closed, X_far, steps)
     assert line is not None and line.shape == (steps + 1, robot.nq)
     assert np.array_equal(line[-1], c.q_closed)
     for i, q in enumerate(line):  # from X_far (i = 0) to X_end, evenly
@@ -292,10 +301,10 @@ def test_exchange_orientation_maps_consistent_directions_exactly(seed):
 @pytest.fixture(scope="module")
 def best_double(problem, lists, shapes, env):
     """The best double grasp of the default problem (right hand picks, left hand places)."""
-    scratch = new_scratch(problem)
+    scratch, rng = new_scratch(problem), np.random.default_rng(0)
     task = problem.spec.task
-    giver, _ = single_configurations(scratch, lists["right"], shapes["right"], task.X_WO_start, env)
-    taker, _ = single_configurations(scratch, lists["left"], shapes["left"], task.X_WO_goal, env)
+    giver, _ = single_configurations(scratch, rng, lists["right"], shapes["right"], task.X_WO_start, env)
+    taker, _ = single_configurations(scratch, rng, lists["left"], shapes["left"], task.X_WO_goal, env)
     doubles = double_grasps(giver, lists["right"], shapes["right"], taker, lists["left"], shapes["left"])
     assert doubles, "no double grasp on the default scene"
     return doubles[0]
@@ -340,46 +349,69 @@ def problem_with(problem, **task):
     return replace(problem, spec=replace(problem.spec, task=replace(problem.spec.task, **task)))
 
 
-def test_object_out_of_reach_fails_at_double_grasps(problem, lists):
+def recording_exchanges(monkeypatch) -> list:
+    """Wraps :func:`handover._exchanges`: the list filled with what it yields, in turn
+    (double grasp, exchange configuration, double grasps tried)."""
+    real, seen = handover._exchanges, []
+
+    def wrapped(*args, **kwargs):
+        for found in real(*args, **kwargs):
+            seen.append(found)
+            yield found
+
+    monkeypatch.setattr(handover, "_exchanges", wrapped)
+    return seen
+
+
+def test_object_out_of_reach_fails_at_double_grasps(problem, lists, monkeypatch):
+    exchanges = recording_exchanges(monkeypatch)
     X_far = translated(problem.spec.task.X_WO_start, [0.0, -1.6, 0.0])  # 2.45 m to the robot's right
-    out = run(problem_with(problem, X_WO_start=X_far), lists, None,
-              OnlineOptions(planner="rrt-connect", grasp_attempts=5), seed=0)
-    assert out.failure is not None and out.failure.stage == "double grasps"
+    out = plan(problem_with(problem, X_WO_start=X_far), lists, None,
+               OnlineOptions(planner="rrt-connect", grasp_attempts=5), seed=0)
+    assert out.failure is not None and out.failure.stage == Stage.GRASPS and out.failure.transition is None
     assert "right-hand" in out.failure.reason and "start pose" in out.failure.reason
     assert "5 tried with IK" in out.failure.reason
-    assert out.phases == [] and out.double is None and out.exchange is None
-    assert out.stats["single_grasps"]["right"]["kept"] == 0
+    # no double grasp, hence no exchange searched and no query
+    assert out.phases == () and out.grasps == () and exchanges == []
+    assert out.counts.get("key_attempts", 0) == 0
+    assert out.counts["single_grasps"]["right"]["kept"] == 0
 
 
 @pytest.mark.parametrize("joint, value, pair", [("r_arm_j4", 0.7, "obstacle:desk_top"),  # the hand in the desk
                                                 ("r_arm_j6", 2.09, "r_arm_link7")])  # wrist folded on the forearm
-def test_start_configuration_in_collision_fails_at_grasp(problem, lists, joint, value, pair):
+def test_start_configuration_in_collision_fails_at_ends(problem, lists, joint, value, pair):
     q = problem.robot.q_rest.copy()
     q[problem.robot.joint_names.index(joint)] = value
     pairs = static_world(problem, problem.spec.task.X_WO_start).colliding_pairs(q)
     assert any(pair in p for p in pairs), pairs
-    out = run(replace(problem, q_start=q), lists, None, OnlineOptions(planner="rrt-connect"), seed=0)
-    assert out.failure is not None and out.failure.stage == "grasp"
+    out = plan(replace(problem, q_start=q), lists, None, OnlineOptions(planner="rrt-connect"), seed=0)
+    assert out.failure is not None and out.failure.stage == Stage.ENDS and out.failure.transition is None
+    assert "start configuration" in out.failure.reason  # the start's, not the goal's
     assert "collision" in out.failure.reason and pair in out.failure.reason
-    assert out.phases == []
+    assert out.phases == () and out.grasps == ()
 
 
-def test_a_one_iteration_rrt_budget_fails_in_a_query(problem, lists):
-    out = run(problem, lists, None, OnlineOptions(planner="rrt-connect", rrt=RRTOptions(step=0.4, max_iterations=1)),
-              seed=0)
-    assert out.failure is not None and out.failure.stage in QUERIES
+def test_a_one_iteration_rrt_budget_fails_in_a_query(problem, lists, monkeypatch):
+    exchanges = recording_exchanges(monkeypatch)
+    out = plan(problem, lists, None, OnlineOptions(planner="rrt-connect", rrt=RRTOptions(step=0.4, max_iterations=1)),
+               seed=0)
+    assert out.failure is not None and out.failure.stage == Stage.TRANSITION
+    assert out.failure.transition in QUERIES
     assert "RRT-Connect" in out.failure.reason and "1 iteration" in out.failure.reason
-    assert out.phases == []
-    # the stages before the queries succeeded; the stage named is the first query (in
+    assert out.phases == () and out.grasps == ()
+    # the stages before the queries succeeded; the transition named is the first query (in
     # plan order) that failed, each query up to it made one RRT-Connect call per attempt,
     # and every attempt failed (as many as there were double grasps with an exchange, up
     # to key_attempts: the small lists give 2)
-    assert out.double is not None and out.exchange is not None
-    attempts = out.stats["key_attempts"]
+    attempts = out.counts["key_attempts"]
     assert 2 <= attempts <= OnlineOptions().key_attempts
+    assert out.counts["double_grasps"] >= attempts
+    assert len(exchanges) >= attempts
+    assert all(dg is not None and ex is not None for dg, ex, _ in exchanges[:attempts])
     assert f"the last of {attempts} double grasps" in out.failure.reason
-    tried = QUERIES[:QUERIES.index(out.failure.stage) + 1]
-    assert all(out.stats["queries"][q]["rrt_calls"] == attempts for q in tried)
+    tried = QUERIES[:QUERIES.index(out.failure.transition) + 1]
+    assert list(out.transitions) == list(QUERIES)
+    assert all(out.transitions[q].rrt_calls == attempts for q in tried)
 
 
 @pytest.fixture(scope="module")
@@ -394,14 +426,19 @@ def roadmap(problem, cache_dir) -> Roadmap:
 
 def test_the_plan_does_not_depend_on_the_number_of_jobs(problem, lists, roadmap):
     """The queries run in worker processes, each with its own random stream: one or two
-    jobs give the same motion and the same counts."""
-    one, two = (run(problem, lists, roadmap, OnlineOptions(jobs=jobs), seed=0) for jobs in (1, 2))
+    jobs give the same motion, the same grasps and the same counts."""
+    one, two = (plan(problem, lists, roadmap, OnlineOptions(jobs=jobs), seed=0) for jobs in (1, 2))
     assert one.failure is None and two.failure is None, (one.failure, two.failure)
-    assert [(m.name, m.holding, m.touching) for m in one.phases] == [(m.name, m.holding, m.touching)
-                                                                      for m in two.phases]
+    assert len(one.phases) == len(two.phases) == 8
+    assert [m.transition for m in one.phases] == [m.transition for m in two.phases]
     for a, b in zip(one.phases, two.phases):
-        assert np.array_equal(a.waypoints, b.waypoints) and np.array_equal(a.times, b.times), a.name
-    assert one.stats == two.stats
+        assert np.array_equal(a.waypoints, b.waypoints) and np.array_equal(a.times, b.times), a.transition.label
+    assert one.grasps == two.grasps and len(one.grasps) == 2
+    assert one.placements.keys() == two.placements.keys()
+    assert all(np.array_equal(one.placements[k], two.placements[k]) for k in one.placements)
+    assert list(one.transitions) == list(two.transitions) == list(QUERIES)
+    assert {q: s.counts() for q, s in one.transitions.items()} == {q: s.counts() for q, s in two.transitions.items()}
+    assert one.counts == two.counts
 
 
 # ------------------------------------------------------------------ roadmap query
@@ -436,10 +473,11 @@ def blocked(problem):
 
 def _query(problem, blocked, seed: int = 0, **options) -> tuple[np.ndarray, QueryStats]:
     X_WO, a, b, rm = blocked
-    scratch = new_scratch(problem, seed, **options)
+    scratch = new_scratch(problem, **options)
     open_ = {h: problem.robot.hands[h].open for h in problem.robot.hands}
     stats = QueryStats()
-    return roadmap_query(scratch, rm, a, b, phase_worlds(scratch, X_WO, None, open_), stats), stats
+    rng = np.random.default_rng(seed)
+    return roadmap_query(scratch, rng, rm, a, b, phase_worlds(scratch, X_WO, None, open_), stats), stats
 
 
 def test_roadmap_query_hides_the_blocked_edge_and_takes_the_detour(problem, blocked):
@@ -467,29 +505,34 @@ def test_roadmap_query_with_default_options_stays_collision_free(problem, blocke
     assert not path_collisions(static_world(problem, X_WO), path, problem)
 
 
-def test_no_reachable_exchange_pose_fails_at_exchange(problem, lists, monkeypatch):
+def test_no_reachable_exchange_pose_fails_at_key_configurations(problem, lists, monkeypatch):
     # as if neither arm pair reached any sample around the exchange position
-    import regrasp_cli.plan.planner as planner
-
     calls = []
-    monkeypatch.setattr(planner, "exchange_configuration", lambda *a, **k: calls.append(a[-1]) or None)
+    monkeypatch.setattr(handover, "exchange_configuration", lambda *a, **k: calls.append(a[-1]) or None)
     options = OnlineOptions(planner="rrt-connect", double_grasps_tried=2, exchange_samples=3)
-    out = run(problem, lists, None, options, seed=0)
-    assert out.failure is not None and out.failure.stage == "exchange"
+    out = plan(problem, lists, None, options, seed=0)
+    assert out.failure is not None and out.failure.stage == Stage.KEYS and out.failure.transition is None
     assert "exchange pose" in out.failure.reason and "2 double grasps" in out.failure.reason
-    assert out.phases == [] and out.exchange is None
+    assert out.phases == () and out.grasps == ()
+    assert out.counts.get("key_attempts", 0) == 0  # no key configurations, so no query
     assert 1 <= len(calls) <= 2 * 3  # samples clear of the obstacles only, for at most 2 double grasps
 
 
 def test_the_other_hand_picks_when_the_nearer_one_cannot(problem, lists, monkeypatch):
-    import regrasp_cli.plan.planner as planner
+    real, chosen = handover.choose_hands, []
 
-    monkeypatch.setattr(planner, "picking_hand", lambda *a: "left")  # a wrong guess: the start is on the right
-    monkeypatch.setattr(planner, "exchange_configuration", lambda *a, **k: None)  # stop after the double grasps
-    out = run(problem, lists, None, OnlineOptions(planner="rrt-connect", double_grasps_tried=1, exchange_samples=1),
-              seed=0)
-    assert out.giver == "right" and out.failure.stage == "exchange"
-    assert out.stats["single_grasps"]["right"]["kept"] > 0 and out.stats["double_grasps"] > 0
+    def recording(*args, **kwargs):
+        found = real(*args, **kwargs)
+        chosen.append(found[0])
+        return found
+
+    monkeypatch.setattr(handover, "choose_hands", recording)
+    monkeypatch.setattr(handover, "picking_hand", lambda *a: "left")  # a wrong guess: the start is on the right
+    monkeypatch.setattr(handover, "exchange_configuration", lambda *a, **k: None)  # stop after the double grasps
+    out = plan(problem, lists, None, OnlineOptions(planner="rrt-connect", double_grasps_tried=1, exchange_samples=1),
+               seed=0)
+    assert chosen == ["right"] and out.failure.stage == Stage.KEYS
+    assert out.counts["single_grasps"]["right"]["kept"] > 0 and out.counts["double_grasps"] > 0
 
 
 # ------------------------------------------------------------------ certified query worlds
@@ -531,7 +574,7 @@ def test_segments_the_certified_check_accepts_are_free_at_a_finer_resolution(pro
     plain check at the same samples lets through or that do collide."""
     X_WO, *_ = blocked
     robot = problem.robot
-    scratch = new_scratch(problem, seed)
+    scratch = new_scratch(problem)
     world = scratch.certified(scratch.world(X_WO))
     fine = static_world(problem, X_WO)
     arm = robot.hands["right"].arm_idx
@@ -546,7 +589,7 @@ def test_segments_the_certified_check_accepts_are_free_at_a_finer_resolution(pro
             continue
         if scratch.segment_free(world, a, b):
             accepted += 1
-            phase = Phase("test", (), (), np.array([a, b]), np.zeros(2))
+            phase = Phase("test", Kind.TRANSIT, {}, (), None, np.array([a, b]), np.zeros(2))
             issues, _ = collision_issues(phase, fine, joint_reach(robot), 0.002, 0.001)
             assert not issues, issues
         else:
@@ -554,15 +597,16 @@ def test_segments_the_certified_check_accepts_are_free_at_a_finer_resolution(pro
     assert accepted >= 5 and refused >= 1, (accepted, refused)
 
 
-def test_start_configuration_closer_than_the_clearance_fails_at_grasp(problem, lists, blocked):
+def test_start_configuration_closer_than_the_clearance_fails_at_ends(problem, lists, blocked):
     """The object 2 mm below the right hand at rest: free, yet too close to certify the
     query that leaves it."""
     X_WO, *_ = blocked
     X_near = just_below_the_hand(problem, X_WO)
-    out = run(problem_with(problem, X_WO_start=X_near), lists, None, OnlineOptions(planner="rrt-connect"), seed=0)
-    assert out.failure is not None and out.failure.stage == "grasp", out.failure
+    out = plan(problem_with(problem, X_WO_start=X_near), lists, None, OnlineOptions(planner="rrt-connect"), seed=0)
+    assert out.failure is not None and out.failure.stage == Stage.ENDS, out.failure
+    assert out.failure.transition is None and "start configuration" in out.failure.reason
     assert "closer than 5 mm" in out.failure.reason and "object" in out.failure.reason
-    assert out.phases == []
+    assert out.phases == () and out.grasps == ()
 
 
 # ------------------------------------------------------------------ retries
@@ -572,28 +616,49 @@ def test_a_failed_query_is_retried_with_the_next_double_grasp(problem, lists, ro
     """The first set of key configurations is made to fail at `place`: the planner takes
     the next double grasp with its own exchange and solves; with one attempt allowed it
     fails at `place`.  The work of both attempts is counted."""
-    import regrasp_cli.plan.planner as planner
+    real_steps, real_solve = handover.steps_of, handover.solve_queries
+    seen, streams, stats = [], [], []  # per attempt: double grasp, query streams, query stats
 
-    real, seen, after_first = planner._queries, [], {}
+    def recording_steps(scratch, dg, ex, lists):
+        seen.append(dg)
+        return real_steps(scratch, dg, ex, lists)
 
-    def first_fails(scratch, roadmap, weights, seed, attempt, g, lists, out):
-        seen.append((attempt, out.double))
-        failure, paths = real(scratch, roadmap, weights, seed, attempt, g, lists, out)
-        if attempt == 0:
-            after_first.update({q: (dict(out.stats["queries"][q]), out.timing[f"{q} planning"]) for q in QUERIES})
-            return ("place", "made to fail"), paths
-        return failure, paths
+    def first_fails(scratch, roadmap, weights, queries, streams_, jobs):
+        results = real_solve(scratch, roadmap, weights, queries, streams_, jobs)
+        streams.append({q.label: list(s) for q, s in zip(queries, streams_)})
+        stats.append({q: r.stats for q, r in results.items()})
+        if len(stats) == 1:
+            assert all(r.error is None for r in results.values())  # the queries themselves succeeded
+            results["place"] = replace(results["place"], path=None, error="made to fail")
+        return results
 
-    monkeypatch.setattr(planner, "_queries", first_fails)
-    out = run(problem, lists, roadmap, OnlineOptions(jobs=1), seed=0)
+    monkeypatch.setattr(handover, "steps_of", recording_steps)
+    monkeypatch.setattr(handover, "solve_queries", first_fails)
+    out = plan(problem, lists, roadmap, OnlineOptions(jobs=1), seed=0)
     assert out.failure is None, out.failure
-    assert [a for a, _ in seen] == [0, 1] and seen[0][1] is not seen[1][1]
-    assert out.double is seen[1][1] and out.stats["key_attempts"] == 2
-    assert out.stats["double_grasps_tried"] >= 2
-    for q, (counts, planning) in after_first.items():  # the second attempt's work added to the first's
-        assert out.timing[f"{q} planning"] > planning
-        assert all(out.stats["queries"][q][k] >= v for k, v in counts.items())
-    seen.clear()
-    once = run(problem, lists, roadmap, OnlineOptions(jobs=1, key_attempts=1), seed=0)
-    assert once.failure is not None and once.failure.stage == "place" and once.failure.reason == "made to fail"
-    assert len(seen) == 1 and once.phases == []
+    assert len(seen) == len(streams) == 2 and seen[0] is not seen[1]
+    # each attempt with its own random streams
+    assert streams[0] == {q: [0, i] for i, q in enumerate(QUERIES)}
+    assert streams[1] == {q: [0, i, 1] for i, q in enumerate(QUERIES)}
+    # the plan holds the second double grasp's grasps, not the first's
+    g, t = seen[1].giver.hand, seen[1].taker.hand
+    expected = ((grasp_id(g, seen[1].giver.grasp), g, seen[1].giver.grasp),
+                (grasp_id(t, seen[1].taker.grasp), t, seen[1].taker.grasp))
+    assert out.grasps == expected
+    assert (seen[0].giver.grasp, seen[0].taker.grasp) != (seen[1].giver.grasp, seen[1].taker.grasp)
+    assert {m.transition.label: dict(m.transition.holding) for m in out.phases}["carry"] == {g: expected[0][0]}
+    assert out.counts["key_attempts"] == 2 and out.counts["double_grasps_tried"] >= 2
+    for q in QUERIES:  # the second attempt's work added to the first's
+        assert out.transitions[q] == TransitionStats().plus(stats[0][q]).plus(stats[1][q]), q
+        assert out.transitions[q].planning_s > stats[0][q].planning
+        assert all(v >= getattr(stats[0][q], k) for k, v in out.transitions[q].counts().items())
+    first = stats[0]
+    for recorded in (seen, streams, stats):
+        recorded.clear()
+    once = plan(problem, lists, roadmap, OnlineOptions(jobs=1, key_attempts=1), seed=0)
+    assert once.failure is not None and once.failure.stage == Stage.TRANSITION
+    assert once.failure.transition == "place" and once.failure.reason == "made to fail"
+    assert len(seen) == 1 and once.phases == () and once.grasps == ()
+    assert once.counts["key_attempts"] == 1
+    assert {q: s.counts() for q, s in once.transitions.items()} == \
+        {q: TransitionStats().plus(first[q]).counts() for q in QUERIES}  # the same first attempt's counts

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
-from regrasp_cli.plan.context import Scratch
-from regrasp_cli.plan.handshape import HandShape, StaticGeometry, hand_hits_static, hands_collide
-from regrasp_cli.plan.keyconf import SingleConfig, approach_axis, shoulder, single_configuration
+from regrasp_cli.manip.context import Scratch
+from regrasp_cli.manip.handshape import HandShape, StaticGeometry, hand_hits_static, hands_collide
+from regrasp_cli.manip.keyconf import SingleConfig, approach_axis, shoulder, single_configuration
 
 
 @dataclass(frozen=True)
@@ -66,14 +66,14 @@ def cheap_order(scratch: Scratch, grasps: GraspList, ks: np.ndarray, X_WO: np.nd
     return ks[np.argsort(-score, kind="stable")]
 
 
-def single_configurations(scratch: Scratch, grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarray,
+def single_configurations(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarray,
                           env: StaticGeometry) -> tuple[list[SingleConfig], SingleStats]:
     o = scratch.options
     ks = cheap_order(scratch, grasps, environment_free(grasps, shapes, X_WO, env), X_WO)
     found, tried = [], 0
     for k in ks[:o.grasp_attempts]:
         tried += 1
-        c = single_configuration(scratch, grasps, int(k), X_WO)
+        c = single_configuration(scratch, rng, grasps, int(k), X_WO)
         if c is not None:
             found.append(c)
             if len(found) >= o.single_per_hand:

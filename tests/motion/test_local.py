@@ -1,4 +1,4 @@
-"""Local planner of the roadmaps (regrasp_cli.roadmap.local): the step count of the
+"""Local planner of the roadmaps (regrasp_cli.motion.local): the step count of the
 certified straight-line planner, the soundness of the per-joint reach bound, and the
 Cartesian spacing of the configurations it checks on the default robot."""
 
@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 
 from regrasp_cli.model.collision import segment_samples
-from regrasp_cli.roadmap.local import LocalPlanner, distance, joint_reach, joint_weights
+from regrasp_cli.motion.local import LocalPlanner, distance, joint_reach, joint_weights
 
 
 # --------------------------------------------------------------------------- steps

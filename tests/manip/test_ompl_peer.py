@@ -1,4 +1,4 @@
-"""The ompl-rrtconnect peer planner (plan/ompl_peer.py) on the default scene.
+"""The ompl-rrtconnect peer planner (manip/ompl_peer.py) on the default scene.
 
 * one query around an obstacle: the statuette stands where the right hand rests and the
   right shoulder swings from one side of it to the other, so the straight segment is
@@ -7,10 +7,10 @@
 * the same seed gives the same path (OMPL's generator is seeded from ours);
 * the iteration budget is OMPL's budget, and a failure names OMPL;
 * without the optional extra, an InputError names it;
-* the whole plan with `planner="ompl-rrtconnect"` runs its queries on OMPL, records
-  OMPL's version, and fails only at a query naming OMPL, or is solved and valid.
+* the whole hand-over with `planner="ompl-rrtconnect"` runs its queries on OMPL, records
+  OMPL's version, and fails only at a transition naming OMPL, or is solved and valid.
 
-Grasp lists are the small ones of tests/plan/test_online.py (same options, same cache).
+Grasp lists are the small ones of tests/manip/test_online.py (same options, same cache).
 """
 
 from __future__ import annotations
@@ -28,18 +28,20 @@ from regrasp_cli.errors import InputError  # noqa: E402
 from regrasp_cli.grasp.build import BuildOptions, GraspList, load_or_build  # noqa: E402
 from regrasp_cli.grasp.single import GraspOptions  # noqa: E402
 from regrasp_cli.model.collision import ObjectPlacement  # noqa: E402
-from regrasp_cli.plan.context import OnlineOptions, Scratch  # noqa: E402
-from regrasp_cli.plan.ompl_peer import ompl_query, ompl_version  # noqa: E402
-from regrasp_cli.plan.planner import phase_worlds, run  # noqa: E402
-from regrasp_cli.plan.queries import QueryFailed, QueryStats  # noqa: E402
-from regrasp_cli.roadmap.local import joint_reach, joint_weights  # noqa: E402
-from regrasp_cli.roadmap.rrt import RRTOptions  # noqa: E402
+from regrasp_cli.manip.context import OnlineOptions, Scratch  # noqa: E402
+from regrasp_cli.manip.ompl_peer import ompl_query, ompl_version  # noqa: E402
+from regrasp_cli.manip.modes import Kind  # noqa: E402
+from regrasp_cli.manip.queries import QueryFailed, QueryStats  # noqa: E402
+from regrasp_cli.manip.status import Stage  # noqa: E402
+from regrasp_cli.manip.tasks.handover import TRANSITIONS, phase_worlds, plan  # noqa: E402
+from regrasp_cli.motion.local import joint_reach, joint_weights  # noqa: E402
+from regrasp_cli.motion.rrt import RRTOptions  # noqa: E402
 from regrasp_cli.trajectory import Phase  # noqa: E402
 from regrasp_cli.validate import collision_issues  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
-GRASP_TARGET = 20  # as tests/plan/test_online.py: the same cached lists
+GRASP_TARGET = 20  # as tests/manip/test_online.py: the same cached lists
 PLAN_SEED = 0
 NO_CLOCK = float("inf")  # tests stop on the iteration budget only, never on the wall clock
 
@@ -61,7 +63,7 @@ def _q(problem, **offsets) -> np.ndarray:
 def dense_collisions(problem, X_WO: np.ndarray, path: np.ndarray) -> list:
     """Issues of the plan checker's dense test (0.01 rad, 5 mm) along ``path`` (k, nq)."""
     world = problem.world(ObjectPlacement(problem.object.mesh, X_WO, None, ()))
-    phase = Phase("test", (), (), np.asarray(path), np.zeros(len(path)))
+    phase = Phase("test", Kind.TRANSIT, {}, (), None, np.asarray(path), np.zeros(len(path)))
     issues, _ = collision_issues(phase, world, joint_reach(problem.robot), 0.01, 0.005)
     return issues
 
@@ -81,11 +83,11 @@ def blocked(problem):
 
 def _query(problem, blocked, seed: int, **options) -> tuple[np.ndarray, QueryStats]:
     X_WO, a, b = blocked
-    scratch = Scratch(problem, OnlineOptions(planner="ompl-rrtconnect", ompl_time=NO_CLOCK, **options),
-                      np.random.default_rng(seed))
+    scratch = Scratch(problem, OnlineOptions(planner="ompl-rrtconnect", ompl_time=NO_CLOCK, **options))
     open_ = {h: problem.robot.hands[h].open for h in problem.robot.hands}
     stats = QueryStats()
-    path = ompl_query(scratch, a, b, phase_worlds(scratch, X_WO, None, open_), joint_weights(problem.robot), stats)
+    path = ompl_query(scratch, np.random.default_rng(seed), a, b, phase_worlds(scratch, X_WO, None, open_),
+                      joint_weights(problem.robot), stats)
     return path, stats
 
 
@@ -123,26 +125,29 @@ def test_without_the_extra_the_error_names_it(monkeypatch):
 
 def test_the_whole_plan_runs_on_ompl_and_a_solved_one_is_valid(problem, lists, cache_dir, tmp_path):
     """With the default budget (3000 iterations a query) OMPL's RRT-Connect often fails the
-    place or rest query, so the plan either fails at a query with OMPL named, or is solved
-    and then must validate.  OMPL ran the grasp and carry queries of every attempt."""
-    from regrasp_cli.plan.command import make_plan
+    place or rest query, so the plan either fails at a transition with OMPL named, or is
+    solved and then must validate.  OMPL ran the grasp and carry queries of every attempt."""
+    from regrasp_cli.manip.record import make_plan
     from regrasp_cli.trajectory import write_plan
     from regrasp_cli.validate import validate_plan
 
     options = OnlineOptions(planner="ompl-rrtconnect", jobs=1, ompl_time=NO_CLOCK)
-    out = run(problem, lists, None, options, PLAN_SEED)
-    queries = out.stats["queries"]
-    attempts = out.stats["key_attempts"]
+    out = plan(problem, lists, None, options, PLAN_SEED)
+    queries = out.transitions
+    attempts = out.counts["key_attempts"]
     assert 1 <= attempts <= options.key_attempts
-    assert queries["grasp"]["rrt_calls"] == attempts and queries["carry"]["rrt_calls"] == attempts
+    assert queries["grasp"].rrt_calls == attempts and queries["carry"].rrt_calls == attempts
     plan_file = tmp_path / "ompl.json"
-    plan = make_plan(problem, lists, out, options, PLAN_SEED, plan_file, cache_dir, {}, timings=False)
-    write_plan(plan_file, plan)
-    assert plan.planner == "ompl-rrtconnect"
-    assert plan.stats["ompl_version"] == ompl_version() and ompl_version().startswith("2.")
+    written = make_plan(problem, lists, out, options, PLAN_SEED, plan_file, cache_dir, {}, timings=False)
+    write_plan(plan_file, written)
+    assert written.planner == "ompl-rrtconnect"
+    assert written.stats["ompl_version"] == ompl_version() and ompl_version().startswith("2.")
+    assert written.stats["counts"]["transitions"] == {q: s.counts() for q, s in queries.items()}
     if out.failure is not None:
-        assert out.failure.stage in ("grasp", "carry", "place", "rest"), str(out.failure)
+        assert out.failure.stage == Stage.TRANSITION and out.failure.transition in TRANSITIONS, str(out.failure)
         assert "OMPL RRT-Connect found no path within its budget of 3000 iterations" in out.failure.reason
+        assert written.status == "failed" and written.failure == out.failure.as_dict()
         return
+    assert written.status == "solved" and written.failure is None
     report = validate_plan(plan_file)
     assert report.valid, [str(i) for i in report.issues]

@@ -1,0 +1,82 @@
+"""`regrasp plan SCENE`: cached artefacts in, plan JSON out, a Table I summary printed.
+
+Missing or stale artefacts (grasp lists, roadmap) are built first with their progress
+bars, or refused with ``--no-build``.  The plan is then checked by the independent
+validator (:mod:`regrasp_cli.validate`) before the command reports success.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from regrasp_cli.artefacts import load_artefacts
+from regrasp_cli.commands.report import CliBuilder
+from regrasp_cli.manip.context import OnlineOptions
+from regrasp_cli.manip.ompl_peer import ompl_version
+from regrasp_cli.manip.queries import Roadmap
+from regrasp_cli.manip.record import make_plan
+from regrasp_cli.manip.solve import Outcome
+from regrasp_cli.manip.status import PlanningFailed, Stage
+from regrasp_cli.manip.tasks import handover
+from regrasp_cli.roadmap.build import RoadmapOptions
+from regrasp_cli.scene import load_problem
+from regrasp_cli.trajectory import Plan, write_plan
+
+
+def print_summary(plan: Plan, outcome: Outcome, console: Console) -> None:
+    """Table I of the paper, one row per transit or transfer query: nodes and seconds of
+    the online planning (search, connections, repairs, smoothing) and of the lazy path
+    validation; then the task's stages."""
+    ompl = f" {plan.stats['ompl_version']}" if "ompl_version" in plan.stats else ""
+    t = Table(title=f"Online planning ({outcome.task}, {plan.planner}{ompl}, seed {plan.seed}): n nodes, T seconds",
+              caption="planning: search, connections, repairs, smoothing; validation: lazy checks "
+                      "(n: invalid edges found)")
+    for c in ("query", "planning n", "planning T", "validation n", "validation T", "total T"):
+        t.add_column(c, justify="right")
+    for q, s in outcome.transitions.items():
+        t.add_row(q, str(s.nodes), f"{s.planning_s:.2f}", str(s.invalid_edges), f"{s.validation_s:.2f}",
+                  f"{s.planning_s + s.validation_s:.2f}")
+    console.print(t)
+    stages = ", ".join(f"{k} {v:.2f} s" for k, v in outcome.stages.items() if k != "timing")
+    kinds = " ".join(p.kind.value for p in plan.phases)
+    console.print(f"{stages}: total {outcome.planning_s:.2f} s; motion of {plan.duration:.1f} s in "
+                  f"{sum(len(p.waypoints) for p in plan.phases)} waypoints over {len(plan.phases)} phases "
+                  f"({kinds})")
+
+
+def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, planner: str, build: bool, jobs: int,
+             timings: bool, check: bool, roadmap_nodes: int = RoadmapOptions.nodes, grasp_target: int | None = None,
+             console: Console | None = None) -> int:
+    """The `plan` command; returns the exit code (0 solved, 1 not)."""
+    from regrasp_cli.commands.validate import print_validation
+    from regrasp_cli.validate import validate_plan
+
+    console = console or Console()
+    if planner == "ompl-rrtconnect":
+        ompl_version()  # InputError naming the extra before anything is loaded
+    problem = load_problem(scene, cache_dir)
+    lists, art, hashes = load_artefacts(scene, cache_dir, problem, build, jobs, planner == "roadmap",
+                                        CliBuilder(console), roadmap_nodes, grasp_target)
+    seed = problem.spec.planning.seed if seed is None else seed
+    options = OnlineOptions(planner=planner, jobs=jobs)
+    outcome = handover.plan(problem, lists, Roadmap.of(art) if art is not None else None, options, seed)
+    plan = make_plan(problem, lists, outcome, options, seed, out_file, cache_dir, hashes, timings)
+    write_plan(out_file, plan)
+    if outcome.failure is not None:
+        f = outcome.failure
+        where = f.stage.value + (f" ({f.transition})" if f.transition else "")
+        console.print(f"[red]not solved[/red]: stage {where}: {f.reason}")
+        console.print(f"plan (status failed): {out_file}")
+        raise outcome.failure
+    print_summary(plan, outcome, console)
+    if check:
+        report = validate_plan(out_file)
+        print_validation(report, console)
+        if not report.valid:
+            raise PlanningFailed(Stage.VALIDATION, f"the written plan fails {len(report.issues)} check(s); first: "
+                                 f"{report.issues[0]}")
+    console.print(f"plan: {out_file}")
+    return 0

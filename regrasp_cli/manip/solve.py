@@ -1,0 +1,170 @@
+"""Solving a path through manipulation modes (:mod:`regrasp_cli.manip.modes`).
+
+A task hands over a list of :class:`Step`: a transition and the pieces of its waypoints,
+in order, each either fixed by the task's key configurations (approach, lift and retreat
+lines, finger closing and opening: the grasp, release and hand-over transitions are solved
+by these straight lines) or the label of a :class:`Query`, a transit or transfer between
+two configurations solved by the planner's path solver: the Super Graph query with lazy
+revalidation and repair (Saut et al. 2010 §V-B, :func:`queries.roadmap_query`),
+single-query RRT-Connect (:func:`queries.rrt_query`) or OMPL's (:func:`ompl_peer.ompl_query`).
+Queries are independent once the key configurations are fixed: each has its own random
+stream, so they give the same paths run in turn or in parallel.  The solved steps become
+phases, timed (stop at every waypoint, :mod:`regrasp_cli.motion.timing`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from regrasp_cli.manip.context import Scratch
+from regrasp_cli.manip.modes import Transition
+from regrasp_cli.manip.ompl_peer import ompl_query
+from regrasp_cli.manip.queries import PhaseWorlds, QueryFailed, QueryStats, Roadmap, roadmap_query, rrt_query
+from regrasp_cli.manip.status import PlanningFailed, Stage
+from regrasp_cli.motion.timing import time_parameterise
+from regrasp_cli.parallel import ordered_map, shared
+
+
+@dataclass(frozen=True)
+class Query:
+    """A transit or transfer from configuration a to b (nq,), in the phase's worlds."""
+
+    label: str
+    a: np.ndarray
+    b: np.ndarray
+    worlds: PhaseWorlds
+
+
+@dataclass(frozen=True)
+class QueryResult:
+    label: str
+    path: np.ndarray | None  # (k, nq), None when it failed
+    stats: QueryStats
+    error: str | None  # why it failed
+    checks: int  # collision checks it made
+
+
+@dataclass(frozen=True)
+class Step:
+    """A transition and its waypoint pieces: arrays (k, nq), or a query label."""
+
+    transition: Transition
+    pieces: tuple = ()
+
+
+@dataclass(frozen=True)
+class PhaseMotion:
+    """A solved, timed transition: waypoints (k, nq), times (k,) s from the plan start."""
+
+    transition: Transition
+    waypoints: np.ndarray
+    times: np.ndarray
+
+
+@dataclass(frozen=True)
+class TransitionStats:
+    """Table I of Saut et al. 2010 per solved query: n nodes, T seconds."""
+
+    nodes: int = 0
+    searches: int = 0
+    invalid_edges: int = 0
+    rrt_calls: int = 0
+    planning_s: float = 0.0
+    validation_s: float = 0.0
+
+    def plus(self, q: QueryStats) -> "TransitionStats":
+        return TransitionStats(self.nodes + q.nodes, self.searches + q.searches,
+                               self.invalid_edges + q.invalid_edges, self.rrt_calls + q.rrt_calls,
+                               self.planning_s + q.planning, self.validation_s + q.validation)
+
+    def counts(self) -> dict:
+        return {"nodes": self.nodes, "searches": self.searches, "invalid_edges": self.invalid_edges,
+                "rrt_calls": self.rrt_calls}
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What a planning run produced; ``failure`` is set when it failed (phases then empty).
+
+    ``grasps``: (id, hand, index in the hand's grasp list) of the grasps the phases hold
+    with; ``placements``: id -> X_WO (4, 4); ``stages``: seconds per stage of the task, in
+    order; ``transitions``: Table I per query label, in plan order; ``counts``:
+    deterministic statistics (the same for the same seed)."""
+
+    task: str
+    phases: tuple[PhaseMotion, ...] = ()
+    grasps: tuple[tuple[str, str, int], ...] = ()
+    placements: dict = field(default_factory=dict)
+    stages: dict = field(default_factory=dict)
+    transitions: dict = field(default_factory=dict)
+    counts: dict = field(default_factory=dict)
+    failure: PlanningFailed | None = None
+
+    @property
+    def planning_s(self) -> float:
+        return float(sum(self.stages.values()))
+
+
+def check_ends(scratch: Scratch, ends) -> None:
+    """Each (q, X_WO, what) of ``ends`` free, and with the queries' clearance: nothing else
+    matters if the robot starts in collision.  Raises PlanningFailed(Stage.ENDS)."""
+    for q, X, what in ends:
+        plain = scratch.world(X)
+        for world, fault in ((plain, "is in collision"),
+                             (scratch.certified(plain), f"is closer than {1000 * scratch.local.margin:g} mm to an "
+                                                        "obstacle or itself")):
+            if not world.is_free(q):
+                pairs = ", ".join("-".join(p) for p in world.colliding_pairs(q)[:3])
+                need = "" if world is plain else "; the query checks need that clearance"
+                raise PlanningFailed(Stage.ENDS, f"the robot's {what} configuration {fault} ({pairs}){need}")
+
+
+def _query_job(i: int) -> QueryResult:
+    """Query ``i`` of the current batch (in a forked worker, or in this process)."""
+    j = shared()
+    scratch, roadmap, query = j["scratch"], j["roadmap"], j["queries"][i]
+    rng = np.random.default_rng(j["streams"][i])
+    qs, before = QueryStats(), scratch.checks
+    try:
+        if scratch.options.planner == "ompl-rrtconnect":
+            path = ompl_query(scratch, rng, query.a, query.b, query.worlds, j["weights"], qs)
+        elif roadmap is None:
+            path = rrt_query(scratch, rng, query.a, query.b, query.worlds, j["weights"], qs)
+        else:
+            path = roadmap_query(scratch, rng, roadmap, query.a, query.b, query.worlds, qs)
+        return QueryResult(query.label, path, qs, None, scratch.checks - before)
+    except QueryFailed as exc:
+        return QueryResult(query.label, None, qs, str(exc), scratch.checks - before)
+
+
+def solve_queries(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarray, queries: list[Query],
+                  streams: list, jobs: int) -> dict[str, QueryResult]:
+    """Every query, by label; ``streams[i]`` seeds query i's generator.  With several
+    jobs they run in the order given (longest first balances two workers)."""
+    job = {"scratch": scratch, "roadmap": roadmap, "weights": weights, "queries": queries, "streams": streams}
+    return {r.label: r for r in ordered_map(_query_job, list(range(len(queries))), jobs, job)}
+
+
+def join(pieces: list[np.ndarray]) -> np.ndarray:
+    """Waypoints (k, nq) of consecutive pieces, each repeated configuration once."""
+    rows = [np.asarray(p) for p in pieces]
+    w = [rows[0][0]]
+    for r in rows:
+        for q in r:
+            if not np.array_equal(q, w[-1]):
+                w.append(q)
+    return np.array(w)
+
+
+def time_steps(steps: list[Step], paths: dict[str, np.ndarray], velocity: np.ndarray,
+               acceleration: np.ndarray) -> tuple[PhaseMotion, ...]:
+    """The steps with their query labels replaced by the solved paths, timed in turn."""
+    out, clock = [], 0.0
+    for step in steps:
+        w = join([paths[p] if isinstance(p, str) else p for p in step.pieces])
+        times = time_parameterise(w, velocity, acceleration) + clock
+        clock = float(times[-1])
+        out.append(PhaseMotion(step.transition, w, times))
+    return tuple(out)

@@ -1,0 +1,352 @@
+"""The hand-over of Saut et al. 2010 (seed 000) as one fixed path through manipulation
+modes: the object resting at ``start``, held by the picking hand, by both hands at the
+exchange pose, by the placing hand, resting at ``goal``.
+
+Stages (§IV-B, §V-B, §V-C), each timed, each returning what it found and its counts:
+
+1. ``double grasps``: single-grasp configurations of the picking hand at the start pose
+   and of the placing hand at the goal pose, then scored pairs (:mod:`manip.doublegrasp`);
+   the hand whose shoulder is nearer the object's start picks, the other when it cannot;
+2. ``exchange``: for the best double grasps in turn, the exchange position on a grid
+   (Fig. 6), its orientation from the grasp directions, then Gaussian samples around it
+   until both arms reach it collision-free (:func:`keyconf.exchange_configuration`): the
+   sampler of the CG_r∩CG_l mode;
+3. ``queries``: the four transit/transfer queries of §V-B (:data:`TRANSITIONS`: grasp,
+   carry, place, rest, the rows of Table I) solved by :func:`solve.solve_queries`, framed
+   by the approach, lift and retreat lines of the key configurations; finger closing and
+   opening are the grasp, hand-over and release transitions.  When a query fails the next
+   double grasp is tried with its own exchange, ``key_attempts`` in all;
+4. ``timing``: stop-at-every-waypoint trapezoids within the URDF velocity limits.
+
+"Right picks, left places" and the four query names are spelled here and nowhere else.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from regrasp_cli.grasp.build import GraspList
+from regrasp_cli.manip.context import OnlineOptions, Scratch
+from regrasp_cli.manip.doublegrasp import DoubleGrasp, double_grasps, single_configurations
+from regrasp_cli.manip.exchange import exchange_orientation, exchange_position, grid_nodes
+from regrasp_cli.manip.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, \
+    palm_and_finger_links, static_geometry
+from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, approach_axis, exchange_configuration, shoulder, wrist
+from regrasp_cli.manip.modes import Kind, Mode, Transition
+from regrasp_cli.manip.ompl_peer import ompl_version
+from regrasp_cli.manip.queries import PhaseWorlds, Roadmap
+from regrasp_cli.manip.solve import Outcome, Query, Step, TransitionStats, check_ends, solve_queries, time_steps
+from regrasp_cli.manip.status import PlanningFailed, Stage
+from regrasp_cli.motion.local import joint_reach, joint_weights
+from regrasp_cli.parallel import ordered_map, shared
+from regrasp_cli.scene import Problem
+from regrasp_cli.spatial import inverse
+
+TASK = "handover"
+TRANSITIONS = ("grasp", "carry", "place", "rest")  # the four queries of §V-B, in plan order
+RUN_ORDER = ("place", "rest", "grasp", "carry")  # longest first, so that two workers finish together
+STAGES = ("double grasps", "exchange", "queries", "timing")
+EXCHANGE_CLEARANCE = 0.02  # m: the object at the exchange pose keeps this from obstacles
+
+
+def grasp_id(hand: str, k: int) -> str:
+    """The plan's id of grasp ``k`` of ``hand``'s cached list."""
+    return f"{hand}-{k}"
+
+
+def mode_path(g: str, t: str, gid_g: str, gid_t: str) -> list[Transition]:
+    """The hand-over's transitions: ``g`` picks with grasp ``gid_g`` and gives the object
+    to ``t``, which places it with ``gid_t``."""
+    start, goal = Mode.resting("start"), Mode.resting("goal")
+    held_g, held_t = Mode.held(**{g: gid_g}), Mode.held(**{t: gid_t})
+    both = Mode.held(**{g: gid_g, t: gid_t})
+    return [Transition(Kind.TRANSIT, start, start, "grasp"),
+            Transition(Kind.GRASP, start, held_g, f"close_{g}", (g,)),
+            Transition(Kind.TRANSFER, held_g, held_g, "carry"),
+            Transition(Kind.HANDOVER, held_g, both, f"close_{t}", (t,)),
+            Transition(Kind.HANDOVER, both, held_t, f"open_{g}", (g,)),
+            Transition(Kind.TRANSFER, held_t, held_t, "place"),
+            Transition(Kind.RELEASE, held_t, goal, f"open_{t}", (t,)),
+            Transition(Kind.TRANSIT, goal, goal, "rest")]
+
+
+def picking_hand(problem: Problem, scratch: Scratch) -> str:
+    p = problem.spec.task.X_WO_start[:3, 3]
+    d = {h: float(np.linalg.norm(shoulder(scratch, h, problem.robot.q_rest) - p)) for h in ("right", "left")}
+    return min(d, key=d.get)
+
+
+def _object_shape(problem: Problem) -> HandShape:
+    from regrasp_cli.model.collision import mesh_geometry
+
+    g = mesh_geometry(problem.object.mesh)
+    g.computeLocalAABB()
+    return HandShape((g,), np.eye(4)[None], np.array([g.aabb_local.center()]), np.array([float(g.aabb_radius)]))
+
+
+def exchange_pose(scratch: Scratch, dg: DoubleGrasp, lists: dict[str, GraspList], env: StaticGeometry,
+                  obj: HandShape) -> tuple[np.ndarray | None, int]:
+    """Centre X_WO (4, 4) of the exchange samples: the grid node of least wrist-path cost
+    (Fig. 6) where both arms reach and the object, turned as the grasp directions ask,
+    keeps clear of the obstacles; and the number of grid nodes tested."""
+    p, robot = scratch.problem, scratch.problem.robot
+    g, t = dg.giver.hand, dg.taker.hand
+    start, goal = p.spec.task.X_WO_start[:3, 3], p.spec.task.X_WO_goal[:3, 3]
+    anchors = np.array([start, goal, wrist(scratch, g, robot.q_rest), wrist(scratch, t, robot.q_rest)])
+    lower, upper = anchors.min(axis=0) - 0.1, anchors.max(axis=0) + 0.1
+    lower[2] = max(start[2], goal[2]) + 0.08
+    upper[2] = max(upper[2], lower[2])
+    nodes = grid_nodes(lower, upper, scratch.options.exchange_step)
+    reach = joint_reach(robot)
+    sh = {h: shoulder(scratch, h, robot.q_rest) for h in (g, t)}
+    arm_reach = {h: 0.85 * reach[robot.hands[h].arm_idx[0]] for h in (g, t)}
+    a_O = {dg.giver.hand: lists[g].X_OG[dg.giver.grasp, :3, :3] @ approach_axis(scratch, g),
+           dg.taker.hand: lists[t].X_OG[dg.taker.grasp, :3, :3] @ approach_axis(scratch, t)}
+    poses = {}
+
+    def pose(x: np.ndarray) -> np.ndarray:
+        X = np.eye(4)
+        X[:3, :3] = exchange_orientation(a_O[g], a_O[t], x - sh[g], x - sh[t])
+        X[:3, 3] = x - X[:3, :3] @ obj.centres[0]  # the object's centre at the grid node
+        return X
+
+    def is_free(x: np.ndarray) -> bool:
+        if any(np.linalg.norm(x - sh[h]) > arm_reach[h] for h in (g, t)):
+            return False
+        X = pose(x)
+        poses[x.tobytes()] = X
+        return not hand_hits_static(obj, X, env, EXCHANGE_CLEARANCE)
+
+    x, tested = exchange_position(nodes, anchors, is_free)
+    return (None if x is None else poses[x.tobytes()]), tested
+
+
+def _perturbed(scratch: Scratch, rng: np.random.Generator, X: np.ndarray, obj: HandShape) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    o = scratch.options
+    c = X[:3, :3] @ obj.centres[0] + X[:3, 3]
+    R = Rotation.from_rotvec(rng.normal(0.0, o.exchange_angle_sigma, 3)).as_matrix() @ X[:3, :3]
+    Y = np.eye(4)
+    Y[:3, :3] = R
+    Y[:3, 3] = c + rng.normal(0.0, o.exchange_sigma, 3) - R @ obj.centres[0]
+    return Y
+
+
+def _lazy_filter(object_pairs: bool, hands: set[str]):
+    """Pairs the roadmap did not certify: with the object, or with a link in ``hands``."""
+    return lambda a, b: (object_pairs and "object" in (a, b)) or a in hands or b in hands
+
+
+def phase_worlds(scratch: Scratch, X_PO: np.ndarray, attached: str | None, fingers: dict) -> PhaseWorlds:
+    robot = scratch.problem.robot
+    changed = set()
+    for hand, values in fingers.items():
+        if not np.array_equal(values, robot.hands[hand].open):
+            changed |= palm_and_finger_links(robot, hand)
+    touching = (attached,) if attached else ()
+    full = scratch.world(X_PO, attached, touching, certified=True)
+    lazy = scratch.world(X_PO, attached, touching, pair_filter=_lazy_filter(True, changed),
+                         key="lazy:" + ",".join(sorted(changed)), certified=True)
+    return PhaseWorlds(full, lazy, fingers)
+
+
+# ------------------------------------------------------------------ double grasps
+
+
+def _single_job(hand: str):
+    """Single-grasp configurations of one hand (in a forked worker, or in this process)."""
+    j = shared()
+    scratch = j["scratch"]
+    rng = np.random.default_rng([j["seed"], 10 + ("right", "left").index(hand)])
+    before = scratch.checks
+    found, stats = single_configurations(scratch, rng, *j["singles"][hand])
+    return found, stats, scratch.checks - before
+
+
+def _double_grasps(scratch: Scratch, lists: dict[str, GraspList], shapes: dict, env: StaticGeometry, g: str,
+                   seed: int) -> tuple[list[DoubleGrasp] | str, dict]:
+    """Double grasps with hand ``g`` picking, best first, or why there are none; and counts."""
+    task, t = scratch.problem.spec.task, OTHER[g]
+    # the two hands' searches are independent: in parallel, each with its own random stream
+    job = {"scratch": scratch, "seed": seed, "singles": {g: (lists[g], shapes[g], task.X_WO_start, env),
+                                                         t: (lists[t], shapes[t], task.X_WO_goal, env)}}
+    (cfg_g, st_g, n_g), (cfg_t, st_t, n_t) = ordered_map(_single_job, [g, t], scratch.options.jobs, job)
+    counts = {"single_checks": n_g + n_t, "single_grasps": {g: st_g.__dict__, t: st_t.__dict__}}
+    for hand, cfgs, st, where in ((g, cfg_g, st_g, "start"), (t, cfg_t, st_t, "goal")):
+        if not cfgs:
+            return (f"no collision-free {hand}-hand grasp configuration at the object's {where} pose "
+                    f"({st.environment_free} of {st.listed} grasps clear the obstacles, {st.tried} tried with IK)",
+                    counts)
+    doubles = double_grasps(cfg_g, lists[g], shapes[g], cfg_t, lists[t], shapes[t])
+    counts["double_grasps"] = len(doubles)
+    return doubles or f"all {len(cfg_g)} x {len(cfg_t)} grasp pairs make the hands collide", counts
+
+
+def choose_hands(scratch: Scratch, lists: dict[str, GraspList], seed: int) -> tuple[str, list[DoubleGrasp], dict]:
+    """The picking hand and its double grasps: the hand nearer the start first, the
+    other when it cannot.  Raises _Failed (Stage.GRASPS) when neither can."""
+    problem = scratch.problem
+    env = static_geometry(problem.spec.obstacles)
+    shapes = {h: hand_shapes(problem.robot, h, lists[h].finger_q) for h in ("right", "left")}
+    guess = picking_hand(problem, scratch)
+    failures, counts = [], {"single_checks": 0}
+    for g in (guess, OTHER[guess]):
+        found, c = _double_grasps(scratch, lists, shapes, env, g, seed)
+        counts["single_checks"] += c.pop("single_checks")
+        if not failures or isinstance(found, list):
+            counts.update(c)  # the first hand's counts, or those of the hand that succeeded
+        if isinstance(found, list):
+            return g, found, counts
+        failures.append(found)
+    raise _Failed(PlanningFailed(Stage.GRASPS, f"{failures[0]}; with the {OTHER[guess]} hand picking instead: "
+                                               f"{failures[1]}"), {}, counts)
+
+
+# ------------------------------------------------------------------ exchange and queries
+
+
+def _exchanges(scratch: Scratch, rng: np.random.Generator, doubles: list[DoubleGrasp],
+               lists: dict[str, GraspList], g: str):
+    """(double grasp, exchange configuration, double grasps tried) best double grasp
+    first: for each of the best ``double_grasps_tried``, the exchange pose of Fig. 6 and
+    then Gaussian samples around it until both arms reach one (a generator: the next is
+    searched only when a query of the previous one failed)."""
+    t, o = OTHER[g], scratch.options
+    env, obj = static_geometry(scratch.problem.spec.obstacles), _object_shape(scratch.problem)
+    for tried, dg in enumerate(doubles[:o.double_grasps_tried], 1):
+        X_c, _ = exchange_pose(scratch, dg, lists, env, obj)
+        if X_c is None:
+            continue
+        for s in range(o.exchange_samples):
+            X = X_c if s == 0 else _perturbed(scratch, rng, X_c, obj)
+            if s and hand_hits_static(obj, X, env, EXCHANGE_CLEARANCE):
+                continue
+            ex = exchange_configuration(scratch, rng, lists[g], dg.giver.grasp, lists[t], dg.taker.grasp, X)
+            if ex is not None:
+                yield dg, ex, tried
+                break
+    yield None, None, min(len(doubles), o.double_grasps_tried)
+
+
+def steps_of(scratch: Scratch, dg: DoubleGrasp, ex: ExchangeConfig,
+             lists: dict[str, GraspList]) -> tuple[list[Step], list[Query]]:
+    """The mode path with its fixed pieces (key configurations and their lines) and the
+    four queries between them."""
+    problem = scratch.problem
+    robot, task = problem.robot, problem.spec.task
+    sg, st = dg.giver, dg.taker
+    g, t = sg.hand, st.hand
+    open_ = {h: robot.hands[h].open for h in (g, t)}
+    closed = {g: lists[g].finger_q[sg.grasp], t: lists[t].finger_q[st.grasp]}
+    X_GO = {g: inverse(lists[g].X_OG[sg.grasp]), t: inverse(lists[t].X_OG[st.grasp])}
+    queries = {
+        "grasp": (problem.q_start, sg.approach[0], phase_worlds(scratch, task.X_WO_start, None, open_)),
+        "carry": (sg.lift[-1], ex.approach[0], phase_worlds(scratch, X_GO[g], g, {g: closed[g], t: open_[t]})),
+        "place": (ex.retreat[-1], st.lift[-1], phase_worlds(scratch, X_GO[t], t, {g: open_[g], t: closed[t]})),
+        "rest": (st.approach[0], problem.q_goal, phase_worlds(scratch, task.X_WO_goal, None, open_)),
+    }
+    pieces = [("grasp", sg.approach), (sg.approach[-1:], sg.q_closed[None]), (sg.lift, "carry", ex.approach),
+              (ex.approach[-1:], ex.q_both[None]), (ex.q_both[None], ex.q_release[None]),
+              (ex.retreat, "place", st.lift[::-1]), (st.q_closed[None], st.approach[-1:]),
+              (st.approach[::-1], "rest")]
+    path = mode_path(g, t, grasp_id(g, sg.grasp), grasp_id(t, st.grasp))
+    return ([Step(tr, p) for tr, p in zip(path, pieces)],
+            [Query(name, *queries[name]) for name in RUN_ORDER])
+
+
+def _keys_and_paths(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarray, seed: int,
+                    lists: dict[str, GraspList], g: str, doubles: list[DoubleGrasp], clock: dict):
+    """Key configurations and the four queries, attempt after attempt: the steps and
+    solved paths of the first attempt whose queries all succeed, the Table I statistics
+    summed over attempts, and counts.  Raises _Failed (Stage.KEYS or TRANSITION)."""
+    o = scratch.options
+    candidates = _exchanges(scratch, np.random.default_rng([seed, 20]), doubles, lists, g)
+    table = {name: TransitionStats() for name in TRANSITIONS}
+    counts = {"query_checks": 0}
+    t0 = time.perf_counter()
+    for attempt in range(o.key_attempts):
+        dg, ex, tried = next(candidates)
+        t0 = _tick(clock, "exchange", t0)
+        counts["double_grasps_tried"] = tried
+        if dg is None:
+            if attempt == 0:
+                raise _Failed(PlanningFailed(Stage.KEYS, f"no reachable collision-free exchange pose for the best "
+                                                         f"{tried} double grasps ({o.exchange_samples} samples "
+                                                         "each)"), {}, counts)
+            break
+        counts["key_attempts"] = attempt + 1
+        steps, queries = steps_of(scratch, dg, ex, lists)
+        # the first attempt's streams, then one per attempt
+        streams = [[seed, TRANSITIONS.index(q.label)] + ([attempt] if attempt else []) for q in queries]
+        results = solve_queries(scratch, roadmap, weights, queries, streams, o.jobs)
+        t0 = _tick(clock, "queries", t0)
+        for name in TRANSITIONS:
+            table[name] = table[name].plus(results[name].stats)
+            counts["query_checks"] += results[name].checks
+        failed = next((n for n in TRANSITIONS if results[n].error is not None), None)
+        if failed is None:
+            return dg, ex, steps, {n: results[n].path for n in TRANSITIONS}, table, counts
+    n = counts["key_attempts"]
+    reason = results[failed].error
+    raise _Failed(PlanningFailed(Stage.TRANSITION, reason if n == 1 else f"{reason} (the last of {n} double "
+                                 "grasps with their exchange tried)", failed), table, counts)
+
+
+class _Failed(Exception):
+    """A failure with the statistics gathered up to it."""
+
+    def __init__(self, failure: PlanningFailed, table: dict, counts: dict):
+        self.failure, self.table, self.counts = failure, table, counts
+
+
+def _tick(clock: dict, stage: str, t0: float) -> float:
+    t = time.perf_counter()
+    clock[stage] = clock.get(stage, 0.0) + t - t0
+    return t
+
+
+def _checks(scratch: Scratch, counts: dict) -> int:
+    """Every collision check, the workers' included (with one job they ran on this scratch)."""
+    workers = counts.get("single_checks", 0) + counts.get("query_checks", 0)
+    return scratch.checks + (workers if scratch.options.jobs > 1 else 0)
+
+
+def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
+         seed: int) -> Outcome:
+    """Plan the pick, hand-over and place; a failure is the Outcome's ``failure``."""
+    scratch = Scratch(problem, options)
+    weights = roadmap.weights if roadmap is not None else joint_weights(problem.robot)
+    if options.planner == "ompl-rrtconnect":
+        ompl_version()  # InputError now, not after the key configurations, when the extra is missing
+    task = problem.spec.task
+    placements = {"start": task.X_WO_start, "goal": task.X_WO_goal}
+    clock, counts, table = dict.fromkeys(STAGES, 0.0), {}, {}
+    t0 = time.perf_counter()
+    try:
+        check_ends(scratch, [(problem.q_start, task.X_WO_start, "start"), (problem.q_goal, task.X_WO_goal, "goal")])
+        try:
+            g, doubles, c = choose_hands(scratch, lists, seed)
+            counts.update(c)
+            t0 = _tick(clock, "double grasps", t0)
+            dg, ex, steps, paths, table, c = _keys_and_paths(scratch, roadmap, weights, seed, lists, g, doubles, clock)
+        except _Failed as exc:  # the failure with the counts of its stage
+            if exc.failure.stage == Stage.GRASPS:
+                _tick(clock, "double grasps", t0)
+            counts.update(exc.counts)
+            table = exc.table
+            raise exc.failure from None
+        counts.update(c)
+        t0 = time.perf_counter()
+        phases = time_steps(steps, paths, problem.robot.velocity, np.full(problem.robot.nq, options.acceleration))
+        _tick(clock, "timing", t0)
+    except PlanningFailed as exc:
+        counts["checks"] = _checks(scratch, counts)
+        return Outcome(TASK, placements=placements, stages=clock, transitions=table, counts=counts, failure=exc)
+    counts["waypoints"] = int(sum(len(p.waypoints) for p in phases))
+    counts["checks"] = _checks(scratch, counts)
+    grasps = ((grasp_id(g, dg.giver.grasp), g, dg.giver.grasp), (grasp_id(OTHER[g], dg.taker.grasp), OTHER[g],
+                                                                  dg.taker.grasp))
+    return Outcome(TASK, phases, grasps, placements, clock, table, counts)

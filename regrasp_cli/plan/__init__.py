@@ -1,1 +1,0 @@
-"""Online planning (Saut et al. 2010, §V-B, §V-C)."""
