@@ -290,6 +290,8 @@ def _phase(r: _Reader, p: Any, i: int, nq: int, grasps: dict[str, PlanGrasp],
     kind = Kind(kind_name)
     holding = _holding(r, p, w, grasps)
     touching = tuple(r.get(p, "touching", w, list))
+    if not all(isinstance(h, str) for h in touching):
+        raise r.error(w + "touching", "expected a list of hand names (strings)")
     placement = r.get(p, "placement", w, (str, type(None)))
     _kind_rules(r, w, kind, holding, touching, placement, placements)
     wp = r.array(r.get(p, "waypoints", w, list), w + "waypoints", (None, nq))

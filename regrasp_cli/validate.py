@@ -205,8 +205,8 @@ def object_pose_issues(phase: Phase, previous: Phase | None, poses: tuple, previ
     out = []
     if previous_poses is not None and (off := _pose_differs(previous_poses[1], poses[0])):
         where = f"placement {phase.placement!r}" if phase.placement is not None else "its pose"
-        out.append(Issue(phase.name, 0, "attachment", f"the object jumps by {off} between the end of phase "
-                                                      f"{previous.name} and {where}"))
+        since = "the start placement" if previous is None else f"the end of phase {previous.name}"
+        out.append(Issue(phase.name, 0, "attachment", f"the object jumps by {off} between {since} and {where}"))
     if phase.object_poses is not None:
         for i, (q, X) in enumerate(zip(phase.waypoints, phase.object_poses)):
             if off := _pose_differs(X, carry.X_WO(robot, q)):
@@ -427,7 +427,8 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         found += limit_issues(phase, robot.joint_names, inputs.lower, inputs.upper)
         found += attachment_issues(plan, phase, robot, carries[k])
         found += kind_issues(phase, robot)
-        found += object_pose_issues(phase, previous, poses[k], poses[k - 1] if k else None, carries[k], robot)
+        before = poses[k - 1] if k else (None, plan.placement("start").X_WO)
+        found += object_pose_issues(phase, previous, poses[k], before, carries[k], robot)
         per_phase.append(found)
         dts.append(perf_counter() - t0)
     job = {"plan": plan, "inputs": inputs, "carries": carries, "reach": reach, "resolution": resolution,

@@ -389,6 +389,15 @@ def test_object_jumps_to_a_moved_placement(plan_dir, base_plan):
     assert "jumps by 10 mm" in jumps[0].message and "end of phase carry" in jumps[0].message
 
 
+def test_the_object_cannot_start_elsewhere_than_at_start(plan_dir, base_plan):
+    """Only the last phase (a transit with the object at the goal), from 0 s: the object
+    would be at its goal without ever having been moved from its start."""
+    rest = _phase(base_plan, "rest")
+    plan = replace(base_plan, phases=(replace(rest, times=rest.times - rest.times[0]),))
+    report = validate_plan(_write(plan_dir, plan))
+    assert ("attachment", "rest", 0) in {(i.check, i.phase, i.waypoint) for i in report.issues}
+
+
 def test_an_intermediate_placement_where_the_object_is_put_down(plan_dir, base_plan):
     """The object released at an intermediate placement ``table`` (where the carry leaves
     it): valid when the goal is there too, and the end is checked against the goal, not
@@ -503,6 +512,14 @@ def test_inconsistent_plan_is_an_input_error(plan_dir, base_plan, field, value, 
     with pytest.raises(InputError) as exc:
         validate_plan(_write_dict(plan_dir, d))
     assert exc.value.field == named and words in exc.value.message, str(exc.value)
+
+
+def test_a_touching_hand_must_be_a_name(plan_dir, base_plan):
+    d = plan_to_dict(base_plan)
+    d["phases"][0]["touching"] = [[HAND]]
+    with pytest.raises(InputError) as exc:
+        validate_plan(_write_dict(plan_dir, d))
+    assert exc.value.field == "phases[0].touching"
 
 
 def test_duplicate_ids_are_input_errors(plan_dir, base_plan):

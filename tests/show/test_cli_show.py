@@ -45,7 +45,7 @@ def test_show_of_a_failed_plan(small_plan, tmp_path):
 
 def test_show_of_a_malformed_plan(tmp_path):
     bad = tmp_path / "bad.json"
-    bad.write_text('{"format": "regrasp.plan/1", "status": "solved"')
+    bad.write_text('{"format": "regrasp.plan/2", "status": "solved"')
     assert_one_error_line(run("show", bad, "--html", tmp_path / "x.html"), str(bad), "not valid JSON")
 
 
