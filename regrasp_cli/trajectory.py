@@ -334,7 +334,8 @@ def plan_from_dict(d: Any, file: Path) -> Plan:
     return Plan(status, d.get("failure"), r.get(d, "scene", "", dict), r.get(d, "robot", "", dict), names,
                 r.get(d, "limits", "", dict), r.get(d, "object", "", dict), tuple(r.get(d, "obstacles", "", list)),
                 r.get(d, "collision", "", dict), grasps, placements, phases, d.get("stats", {}),
-                int(d.get("seed", 0)), str(d.get("planner", "roadmap")), str(d.get("task", "")))
+                r.get(d, "seed", "", int) if "seed" in d else 0, str(d.get("planner", "roadmap")),
+                str(d.get("task", "")))
 
 
 def read_plan(path: str | Path) -> Plan:
