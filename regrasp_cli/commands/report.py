@@ -133,16 +133,24 @@ def provenance_table(file: Path, prov) -> Table:
 def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, jobs: int,
                      positions: int | None, orientations: int | None, target: int | None = None,
                      weights: str | None = None, console: Console | None = None) -> None:
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from regrasp_cli.grasp.build import build_grasps
     from regrasp_cli.config import load_scene_spec
 
-    console = console or Console()
     spec = load_scene_spec(scene)
     options = build_options(spec.planning.seed, seed, jobs, positions, orientations, target, weights)
-    load_problem(scene, cache_dir)  # every input error before the progress bars start
     hands = ["right", "left"] if hand == "both" else [hand]
+    build_grasp_lists(scene, cache_dir, hands, options, console or Console())
+
+
+def build_grasp_lists(scene: Path, cache_dir: Path, hands: list[str], options, console: Console) -> None:
+    """Build the grasp lists of ``hands`` with ``options`` (a BuildOptions), with progress
+    bars and the summary tables."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from regrasp_cli.config import load_scene_spec
+    from regrasp_cli.grasp.build import build_grasps
+
+    spec = load_scene_spec(scene)
+    load_problem(scene, cache_dir)  # every input error before the progress bars start
     reports = []
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=console, transient=False) as bar:
@@ -213,15 +221,20 @@ def _hand_of(file: Path) -> str:
 
 def run_roadmap_build(scene: Path, cache_dir: Path, nodes: int, tree: bool, seed: int | None, jobs: int,
                       console: Console | None = None) -> None:
+    from regrasp_cli.config import load_scene_spec
+
+    options = roadmap_options(load_scene_spec(scene), nodes, tree, seed)
+    _positive(jobs, "--jobs")
+    build_roadmap_shown(scene, cache_dir, options, jobs, console or Console())
+
+
+def build_roadmap_shown(scene: Path, cache_dir: Path, options, jobs: int, console: Console) -> None:
+    """Build the roadmap with ``options`` (a RoadmapOptions), with progress bars and the
+    summary tables."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from regrasp_cli.config import load_scene_spec
     from regrasp_cli.roadmap.build import build_roadmap
 
-    console = console or Console()
-    spec = load_scene_spec(scene)
-    options = roadmap_options(spec, nodes, tree, seed)
-    _positive(jobs, "--jobs")
     load_problem(scene, cache_dir)  # every input error before the progress bars start
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=console) as bar:
@@ -233,7 +246,8 @@ def run_roadmap_build(scene: Path, cache_dir: Path, nodes: int, tree: bool, seed
             bar.update(tasks[stage], completed=done, total=total)
 
         art, rep = build_roadmap(scene, cache_dir, options, jobs, progress=show)
-    t = Table(title=f"Roadmap ({'tree' if tree else 'graph'} mode, {nodes} nodes per elementary roadmap)")
+    t = Table(title=f"Roadmap ({'tree' if options.tree else 'graph'} mode, {options.nodes} nodes per elementary "
+                    "roadmap)")
     t.add_column("what")
     t.add_column("value")
     for k, v in rep.rows.items():
@@ -280,8 +294,7 @@ class CliBuilder:
         self.console = console
 
     def grasps(self, scene: Path, cache_dir: Path, hand: str, options) -> None:
-        run_grasps_build(scene, cache_dir, hand, options.seed, options.jobs, None, None, options.grasp.target,
-                         console=self.console)
+        build_grasp_lists(scene, cache_dir, [hand], options, self.console)
 
     def roadmap(self, scene: Path, cache_dir: Path, options, jobs: int) -> None:
-        run_roadmap_build(scene, cache_dir, options.nodes, options.tree, options.seed, jobs, console=self.console)
+        build_roadmap_shown(scene, cache_dir, options, jobs, self.console)
