@@ -155,7 +155,8 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
               help="Queries through the cached Super Graph, single-query RRT-Connect (the paper's baseline) or "
                    "OMPL's RRT-Connect (extra 'ompl').")
 @click.option("--no-build", is_flag=True, help="Refuse missing or stale artefacts instead of building them.")
-@click.option("--jobs", type=int, default=2, show_default=True, help="Worker processes for artefact builds.")
+@click.option("--jobs", type=int, default=2, show_default=True,
+              help="Worker processes for artefact builds and the online stages (the plan does not depend on it).")
 @click.option("--no-timings", is_flag=True,
               help="Leave wall-clock times out of the plan, so that the same seed writes the same bytes.")
 @click.option("--no-check", is_flag=True, help="Skip the independent validation of the written plan.")

@@ -62,8 +62,9 @@ class Motion:
 
 @dataclass(frozen=True, eq=False)
 class KeyFrame:
-    """A moment worth a picture: ``name`` (one of :data:`KEY_FRAMES`), the phase it ends
-    (or starts, for ``start``), its time t (s), the configuration q (nq,) and X_WO (4, 4)."""
+    """A moment worth a picture: ``name`` (one of :data:`KEY_FRAMES`, with ``-2`` and so on
+    for a repeat), the phase it ends (or starts, for ``start``), its time t (s), the
+    configuration q (nq,) and X_WO (4, 4)."""
 
     name: str
     phase: int
