@@ -25,7 +25,7 @@ from regrasp_cli.config import SHAPES, ObstacleSpec
 from regrasp_cli.errors import InputError, StaleArtefactError
 from regrasp_cli.model.collision import CollisionOptions
 from regrasp_cli.model.objects import load_object_mesh
-from regrasp_cli.model.robot import Robot, load_robot
+from regrasp_cli.model.robot import Kinematics, Robot, load_robot
 from regrasp_cli.spatial import inverse
 from regrasp_cli.store import sha256_file
 from regrasp_cli.trajectory import Plan
@@ -212,13 +212,13 @@ class Carry:
     hand: str | None
     X_PO: np.ndarray  # (4, 4)
 
-    def X_WO(self, robot: Robot, q: np.ndarray) -> np.ndarray:
+    def X_WO(self, kin: Kinematics, q: np.ndarray) -> np.ndarray:
         if self.hand is None:
             return self.X_PO
-        return robot.fk(q, robot.hands[self.hand].grasp_frame) @ self.X_PO
+        return kin.fk(q, kin.robot.hands[self.hand].grasp_frame) @ self.X_PO
 
 
-def carry_of(file: Path, plan: Plan, k: int, robot: Robot, X_WO: np.ndarray) -> Carry:
+def carry_of(file: Path, plan: Plan, k: int, kin: Kinematics, X_WO: np.ndarray) -> Carry:
     """How the object moves in phase ``k`` given its pose X_WO (4, 4) at the end of the
     previous phase (or the start placement): at the phase's placement when it rests, with
     the first holding hand (by name order) when held.
@@ -233,18 +233,18 @@ def carry_of(file: Path, plan: Plan, k: int, robot: Robot, X_WO: np.ndarray) -> 
     if phase.placement is not None:
         return Carry(None, plan.placement(phase.placement).X_WO)
     hand = sorted(phase.holding)[0]
-    return Carry(hand, inverse(robot.fk(phase.waypoints[0], robot.hands[hand].grasp_frame)) @ X_WO)
+    return Carry(hand, inverse(kin.fk(phase.waypoints[0], kin.robot.hands[hand].grasp_frame)) @ X_WO)
 
 
-def follow(file: Path, plan: Plan, robot: Robot) -> tuple[list[Carry], list[tuple[np.ndarray, np.ndarray]]]:
+def follow(file: Path, plan: Plan, kin: Kinematics) -> tuple[list[Carry], list[tuple[np.ndarray, np.ndarray]]]:
     """Per phase, its :class:`Carry` and the object's pose (X_WO at its first waypoint,
     X_WO at its last), starting from the ``start`` placement."""
     X_WO = plan.placement("start").X_WO
     carries, poses = [], []
     for k, phase in enumerate(plan.phases):
-        carry = carry_of(file, plan, k, robot, X_WO)
-        X_first = carry.X_WO(robot, phase.waypoints[0])
-        X_WO = carry.X_WO(robot, phase.waypoints[-1])
+        carry = carry_of(file, plan, k, kin, X_WO)
+        X_first = carry.X_WO(kin, phase.waypoints[0])
+        X_WO = carry.X_WO(kin, phase.waypoints[-1])
         carries.append(carry)
         poses.append((X_first, X_WO))
     return carries, poses

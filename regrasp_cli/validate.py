@@ -42,7 +42,7 @@ import trimesh
 from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
 from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
-from regrasp_cli.model.robot import Robot
+from regrasp_cli.model.robot import Kinematics, Robot
 from regrasp_cli.motion.local import held_reach, joint_reach
 from regrasp_cli.motion.timing import segment_duration
 from regrasp_cli.parallel import ordered_map, shared
@@ -152,16 +152,16 @@ def _finger_idx(robot: Robot, grasp: PlanGrasp) -> list[int] | None:
     return idx if len(idx) == len(grasp.finger_joints) else None  # else reported by the grasp check
 
 
-def attachment_issues(plan: Plan, phase: Phase, robot: Robot, carry: Carry) -> list[Issue]:
+def attachment_issues(plan: Plan, phase: Phase, kin: Kinematics, carry: Carry) -> list[Issue]:
     """Whether the holding hands agree with their grasps (pose, closed fingers) where the
     object is (``carry``); the first holder carries it, so only the others are checked
     at every waypoint."""
-    out, q = [], phase.waypoints
+    out, q, robot = [], phase.waypoints, kin.robot
     for hand, gid in phase.holding.items():
         grasp = plan.grasp(gid)
         for i in range(1 if hand == carry.hand else len(q)):
-            X_WO_grasp = robot.fk(q[i], robot.hands[hand].grasp_frame) @ inverse(grasp.X_OG)
-            off = _pose_differs(X_WO_grasp, carry.X_WO(robot, q[i]))
+            X_WO_grasp = kin.fk(q[i], robot.hands[hand].grasp_frame) @ inverse(grasp.X_OG)
+            off = _pose_differs(X_WO_grasp, carry.X_WO(kin, q[i]))
             if off:
                 out.append(Issue(phase.name, i, "attachment", f"the {hand} hand's grasp {gid} puts the object "
                                                               f"{off} away from where it is"))
@@ -198,7 +198,7 @@ def kind_issues(phase: Phase, robot: Robot) -> list[Issue]:
 
 
 def object_pose_issues(phase: Phase, previous: Phase | None, poses: tuple, previous_poses: tuple | None,
-                       carry: Carry, robot: Robot) -> list[Issue]:
+                       carry: Carry, kin: Kinematics) -> list[Issue]:
     """The object does not jump between phases (a resting phase's placement is where the
     previous phase left it), and the per-waypoint ``object_poses``, when given, are where
     the object is."""
@@ -209,7 +209,7 @@ def object_pose_issues(phase: Phase, previous: Phase | None, poses: tuple, previ
         out.append(Issue(phase.name, 0, "attachment", f"the object jumps by {off} between {since} and {where}"))
     if phase.object_poses is not None:
         for i, (q, X) in enumerate(zip(phase.waypoints, phase.object_poses)):
-            if off := _pose_differs(X, carry.X_WO(robot, q)):
+            if off := _pose_differs(X, carry.X_WO(kin, q)):
                 out.append(Issue(phase.name, i, "attachment", f"object_poses[{i}] is {off} away from where the "
                                                               "object is"))
                 break
@@ -344,7 +344,7 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
     """Fingertip sphere centres at ``p + r_tip n`` (as the grasp search puts them) where the
     hand takes the object: the first waypoint of the first phase holding with the grasp.
     ``poses`` holds X_WO at the first and last waypoint of each phase."""
-    robot, out = inputs.robot, []
+    robot, kin, out = inputs.robot, Kinematics(inputs.robot), []
     for g in plan.grasps:
         c, hand = inputs.contacts[g.id], robot.hands[g.hand]
         k = next((k for k, p in enumerate(plan.phases) if p.holding.get(g.hand) == g.id), None)
@@ -359,7 +359,7 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
             j = fingers[f]
             target_O = p + hand.spec.fingers[j].tip_radius * n / np.linalg.norm(n)
             p_W = X_WO[:3, :3] @ target_O + X_WO[:3, 3]
-            d = float(np.linalg.norm(robot.fk(q, hand.tip_frames[j])[:3, 3] - p_W))
+            d = float(np.linalg.norm(kin.fk(q, hand.tip_frames[j])[:3, 3] - p_W))
             if d > TIP_TOL:
                 out.append(Issue(phase.name, 0, "grasp",
                                  f"grasp {g.id}: the {f} fingertip is {d * 1000:.3g} mm from its contact"))
@@ -415,9 +415,9 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         return ValidationReport((Issue(None, None, "status", msg),), 0, {})
 
     inputs = load_inputs(plan, path)
-    robot, reach = inputs.robot, joint_reach(inputs.robot)
+    robot, reach, kin = inputs.robot, joint_reach(inputs.robot), Kinematics(inputs.robot)
     issues = [Issue(None, None, "input", note) for note in inputs.notes]
-    carries, poses = follow(path, plan, robot)
+    carries, poses = follow(path, plan, kin)
     per_phase, dts = [], []
     for k, phase in enumerate(plan.phases):
         t0 = perf_counter()
@@ -425,10 +425,10 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         found = continuity_issues(phase, previous, robot.joint_names)
         found += timing_issues(phase, previous, inputs.velocity, inputs.acceleration)
         found += limit_issues(phase, robot.joint_names, inputs.lower, inputs.upper)
-        found += attachment_issues(plan, phase, robot, carries[k])
+        found += attachment_issues(plan, phase, kin, carries[k])
         found += kind_issues(phase, robot)
         before = poses[k - 1] if k else (None, plan.placement("start").X_WO)
-        found += object_pose_issues(phase, previous, poses[k], before, carries[k], robot)
+        found += object_pose_issues(phase, previous, poses[k], before, carries[k], kin)
         per_phase.append(found)
         dts.append(perf_counter() - t0)
     job = {"plan": plan, "inputs": inputs, "carries": carries, "reach": reach, "resolution": resolution,

@@ -30,6 +30,7 @@ from regrasp_cli.commands.validate import print_validation
 from regrasp_cli.grasp.workspace import hand_workspace
 from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import ObjectPlacement
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.motion.timing import time_parameterise
 from regrasp_cli.replay import Carry
 from regrasp_cli.spatial import inverse
@@ -72,7 +73,7 @@ def held(problem):
             continue
         q = problem.q_start.copy()
         q[h.idx] = g.finger_q
-        X_WO = robot.fk(q, h.grasp_frame) @ inverse(g.X_OG)
+        X_WO = Kinematics(robot).fk(q, h.grasp_frame) @ inverse(g.X_OG)
         world = problem.world(ObjectPlacement(problem.object.mesh, X_WO, None, (HAND,)))
         if world.segment_free(problem.q_start, q, 0.005):
             return g, q
@@ -120,8 +121,8 @@ def base_plan(problem, held) -> Plan:
     h = robot.hands[HAND]
     velocity, acceleration = robot.velocity, 2.0 * robot.velocity
     motion = _motion(problem, q_grasp)
-    X_WO_start = robot.fk(q_grasp, h.grasp_frame) @ inverse(g.X_OG)
-    X_WO_end = robot.fk(motion[1][-1][-1], h.grasp_frame) @ inverse(g.X_OG)
+    X_WO_start = Kinematics(robot).fk(q_grasp, h.grasp_frame) @ inverse(g.X_OG)
+    X_WO_end = Kinematics(robot).fk(motion[1][-1][-1], h.grasp_frame) @ inverse(g.X_OG)
     fingers = [f.name for f in h.spec.fingers]
     contacts = tuple({"finger": fingers[f], "point": g.points[f], "normal": g.normals[f]}
                      for f in np.flatnonzero(g.in_contact))
@@ -263,7 +264,7 @@ def test_print_validation(plan_dir, base_plan, problem):
 def test_waypoint_in_the_desk_is_a_collision(plan_dir, base_plan, problem):
     # leaning forward takes the hands down through the desk top (z = 0.74) in front of the robot
     q = _joint(problem.robot, _phase(base_plan, "rest").waypoints[1], torso_pitch1=0.6)
-    assert problem.robot.fk(q, problem.robot.hands[HAND].grasp_frame)[2, 3] < 0.74
+    assert Kinematics(problem.robot).fk(q, problem.robot.hands[HAND].grasp_frame)[2, 3] < 0.74
     report = validate_plan(_write(plan_dir, _with_waypoint(base_plan, "rest", 1, q)))
     hits = [i for i in report.issues if i.check == "collision"]
     assert hits and all(i.phase == "rest" for i in hits)

@@ -27,7 +27,7 @@ from regrasp_cli.grasp.quality import GraspScores, QualityWeights, force_ellipso
 from regrasp_cli.grasp.surface import Surface
 from regrasp_cli.grasp.workspace import FingerWorkspace, SphereVoxels, sphere_voxels
 from regrasp_cli.model.collision import cold_start, eroded_geometry, mesh_geometry
-from regrasp_cli.model.robot import Robot
+from regrasp_cli.model.robot import Kinematics, Robot
 from regrasp_cli.spatial import inverse
 
 
@@ -118,8 +118,9 @@ class HandModel:
             for f_ in {fa, fb} - {None}:
                 pairs_of[f_].append(k)
         self.pairs_of = pairs_of
-        self.data = model.createData()
-        self.X_WG = robot.fk(self.q, h.grasp_frame)
+        kin = Kinematics(robot)
+        self.data = kin.data
+        self.X_WG = kin.fk(self.q, h.grasp_frame)
         self._voxels: tuple[int, tuple[SphereVoxels, ...]] | None = None
 
     def voxels(self, workspaces: tuple[FingerWorkspace, ...]) -> tuple[SphereVoxels, ...]:

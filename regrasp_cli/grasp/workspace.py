@@ -26,7 +26,7 @@ import pinocchio as pin
 from scipy.spatial import cKDTree
 
 from regrasp_cli.model.collision import cold_start
-from regrasp_cli.model.robot import Robot
+from regrasp_cli.model.robot import Kinematics, Robot
 from regrasp_cli.spatial import inverse
 from regrasp_cli.store import Provenance, is_fresh, read_artefact, sha256_params, write_artefact
 
@@ -187,12 +187,13 @@ def tip_positions(robot: Robot, hand: str, finger: int, Q: np.ndarray,
     q = robot.q_rest.copy()
     q[h.idx] = h.open
     idx, tip = h.finger_idx[finger], h.tip_frames[finger]
-    model, data = robot.model, robot.model.createData()
+    kin = Kinematics(robot)
+    model, data = robot.model, kin.data
     gm = _palm_pairs(robot, hand, finger) if with_collisions else None
     gd = gm.createData() if with_collisions else None
     if gd is not None:
         cold_start(gd)
-    X_GW = inverse(robot.fk(q, h.grasp_frame))
+    X_GW = inverse(kin.fk(q, h.grasp_frame))
     out, hit = np.empty((len(Q), 3)), np.zeros(len(Q), dtype=bool)
     for k, qf in enumerate(Q):
         q[idx] = qf
@@ -271,8 +272,9 @@ def finger_workspace(robot: Robot, hand: str, finger: int, options: WorkspaceOpt
     q = robot.q_rest.copy()
     q[h.idx] = h.open
     root_frame = robot.model.getFrameId(robot.joint_names[idx[0]], pin.FrameType.JOINT)
-    X_GW = inverse(robot.fk(q, h.grasp_frame))
-    p_root = X_GW[:3, :3] @ robot.fk(q, root_frame)[:3, 3] + X_GW[:3, 3]
+    kin = Kinematics(robot)
+    X_GW = inverse(kin.fk(q, h.grasp_frame))
+    p_root = X_GW[:3, :3] @ kin.fk(q, root_frame)[:3, 3] + X_GW[:3, 3]
     return FingerWorkspace(centres[order], radii[order], np.concatenate(W_all), np.concatenate(Q_all),
                            np.concatenate(D_all), p_root)
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
 from regrasp_cli.model.ik import IKOptions
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.manip.handshape import palm_and_finger_links
 from regrasp_cli.roadmap.compose import margin_rule
 from regrasp_cli.motion.local import LocalPlanner, held_reach, joint_reach
@@ -78,8 +79,10 @@ class Scratch:
     options: OnlineOptions
     worlds: dict = field(default_factory=dict)
     local: LocalPlanner | None = None
+    kin: Kinematics | None = None  # FK scratch of this run
 
     def __post_init__(self) -> None:
+        self.kin = Kinematics(self.problem.robot)
         self._held: dict = {}  # local planners for a held object, by hand and placement
         self.local = LocalPlanner(self.options.resolution, self.options.cartesian_step / 2,
                                   joint_reach(self.problem.robot))

@@ -88,12 +88,12 @@ def approach_axis(scratch: Scratch, hand: str) -> np.ndarray:
 def shoulder(scratch: Scratch, hand: str, q: np.ndarray) -> np.ndarray:
     """Position (3,) of the first joint of the hand's arm at q."""
     robot = scratch.problem.robot
-    return robot.fk(q, robot.joint_names[robot.hands[hand].arm_idx[0]])[:3, 3]
+    return scratch.kin.fk(q, robot.joint_names[robot.hands[hand].arm_idx[0]])[:3, 3]
 
 
 def wrist(scratch: Scratch, hand: str, q: np.ndarray) -> np.ndarray:
     robot = scratch.problem.robot
-    X_WG = robot.fk(q, robot.hands[hand].grasp_frame)
+    X_WG = scratch.kin.fk(q, robot.hands[hand].grasp_frame)
     X_JG = robot.model.frames[robot.hands[hand].grasp_frame].placement.homogeneous
     return (X_WG @ inverse(X_JG))[:3, 3]
 
@@ -110,7 +110,7 @@ def free_arm_cost(scratch: Scratch, hand: str, q: np.ndarray) -> float:
 
     def plane_distance(qc, p):
         s_r, s_l = shoulder(scratch, "right", qc), shoulder(scratch, "left", qc)
-        torso = robot.fk(qc, robot.joint_names[robot.groups["torso"][0]])[:3, 3]
+        torso = scratch.kin.fk(qc, robot.joint_names[robot.groups["torso"][0]])[:3, 3]
         n = np.cross(s_r - torso, s_l - torso)
         n /= max(np.linalg.norm(n), 1e-9)
         return abs(float(n @ (p - torso)))
@@ -132,7 +132,7 @@ def cartesian_line(scratch: Scratch, rng: np.random.Generator, hand: str, q_end:
     IK fails or the arm would jump (a branch change)."""
     robot = scratch.problem.robot
     h = robot.hands[hand]
-    X_end = robot.fk(q_end, h.grasp_frame)
+    X_end = scratch.kin.fk(q_end, h.grasp_frame)
     qs, q = [q_end], q_end
     opts = IKOptions(restarts=0, max_iters=60)
     for i in range(1, steps + 1):
@@ -166,7 +166,7 @@ def _approach(scratch: Scratch, rng: np.random.Generator, hand: str, q_pre: np.n
     robot, o = scratch.problem.robot, scratch.options
     h = robot.hands[hand]
     certified = scratch.certified(world)
-    X_WG = robot.fk(q_pre, h.grasp_frame)
+    X_WG = scratch.kin.fk(q_pre, h.grasp_frame)
     away = X_WG[:3, 3] - centre_W
     back = -(X_WG[:3, :3] @ approach_axis(scratch, hand))
     for d in (away, *directions_extra, back):

@@ -7,9 +7,9 @@ For URDFs whose joints all have one coordinate this is pinocchio's own order and
 are converted.  The groups follow Saut et al. 2010, §V-A (Fig. 4): the torso is the
 *common* part, each arm (+ its hand) an *independent* part.
 
-A :class:`Robot` is immutable once built; it keeps one pinocchio ``Data`` as scratch for
-its convenience functions (FK), so a Robot is not to be shared between threads
-(processes, as joblib uses, are fine).
+A :class:`Robot` is immutable once built and holds no scratch: like pinocchio's Model/Data
+split, forward kinematics goes through a :class:`Kinematics` (one pinocchio ``Data``),
+which each worker or query makes for itself.  A Robot may be shared freely.
 """
 
 from __future__ import annotations
@@ -86,7 +86,6 @@ class Robot:
         self.model: pin.Model = model
         self.collision_model: pin.GeometryModel = collision
         self.visual_model: pin.GeometryModel = visual
-        self._data = model.createData()
 
         names, idx_q, nqs = [], [], []
         for j in range(1, model.njoints):
@@ -182,17 +181,6 @@ class Robot:
         qp[self._idx_q[c] + 1] = np.sin(q[c])
         return qp
 
-    def fk(self, q: np.ndarray, frame: str | int) -> np.ndarray:
-        """X_WF: pose (4, 4) of a frame (link or joint name, or frame id) in the base frame W."""
-        fid = frame if isinstance(frame, (int, np.integer)) else self.frame_id(frame)
-        pin.forwardKinematics(self.model, self._data, self.to_pin(q))
-        return pin.updateFramePlacement(self.model, self._data, int(fid)).homogeneous.copy()
-
-    def fk_many(self, q: np.ndarray, frames) -> list[np.ndarray]:
-        """Poses of several frames for one configuration (one FK pass)."""
-        pin.framesForwardKinematics(self.model, self._data, self.to_pin(q))
-        return [self._data.oMf[int(f)].homogeneous.copy() for f in frames]
-
     def within_limits(self, q: np.ndarray, tol: float = 1e-9) -> bool:
         return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
 
@@ -215,6 +203,30 @@ class Robot:
     def link_of_geometry(self, gid: int) -> str:
         """Name of the URDF link a collision geometry belongs to."""
         return self.model.frames[self.collision_model.geometryObjects[gid].parentFrame].name
+
+
+class Kinematics:
+    """Forward-kinematics scratch of one worker or query: a pinocchio ``Data`` of a shared
+    :class:`Robot` (~0.4 ms to make, ~2 us per FK), overwritten by every call."""
+
+    __slots__ = ("robot", "data")
+
+    def __init__(self, robot: Robot):
+        self.robot = robot
+        self.data = robot.model.createData()
+
+    def fk(self, q: np.ndarray, frame: str | int) -> np.ndarray:
+        """X_WF: pose (4, 4) of a frame (link or joint name, or frame id) in the base frame W."""
+        r = self.robot
+        fid = frame if isinstance(frame, (int, np.integer)) else r.frame_id(frame)
+        pin.forwardKinematics(r.model, self.data, r.to_pin(q))
+        return pin.updateFramePlacement(r.model, self.data, int(fid)).homogeneous.copy()
+
+    def fk_many(self, q: np.ndarray, frames) -> list[np.ndarray]:
+        """Poses X_WF (4, 4) of several frame ids for one configuration (one FK pass)."""
+        r = self.robot
+        pin.framesForwardKinematics(r.model, self.data, r.to_pin(q))
+        return [self.data.oMf[int(f)].homogeneous.copy() for f in frames]
 
 
 def load_robot(path: str | Path) -> Robot:

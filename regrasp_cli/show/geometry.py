@@ -23,7 +23,7 @@ import numpy as np
 import trimesh
 
 from regrasp_cli.config import ObstacleSpec
-from regrasp_cli.model.robot import Robot
+from regrasp_cli.model.robot import Kinematics, Robot
 from regrasp_cli.spatial import inverse
 
 KINDS = ("box", "sphere", "cylinder", "capsule", "mesh")
@@ -168,9 +168,9 @@ def robot_links(robot: Robot, source: str = "visual", max_faces: int | None = No
     return tuple(LinkShapes(robot.model.frames[f].name, f, tuple(s)) for f, s in sorted(by_frame.items()))
 
 
-def link_poses(robot: Robot, links: Sequence[LinkShapes], q: np.ndarray) -> np.ndarray:
+def link_poses(kin: Kinematics, links: Sequence[LinkShapes], q: np.ndarray) -> np.ndarray:
     """X_WL (L, 4, 4) of ``links`` at configuration q (nq,) (the robot's joint order)."""
-    return np.array(robot.fk_many(np.asarray(q, dtype=float), [ls.frame_id for ls in links])).reshape(-1, 4, 4)
+    return np.array(kin.fk_many(np.asarray(q, dtype=float), [ls.frame_id for ls in links])).reshape(-1, 4, 4)
 
 
 def obstacle_shapes(obstacles: Iterable[ObstacleSpec]) -> tuple[Shape, ...]:

@@ -185,7 +185,6 @@ def animation_command(tracks: dict, fps: float) -> dict:
 def scene_commands(view: PlanView, motion: Motion, source: str = "visual") -> tuple[list[dict], dict]:
     """The static scene and the animation of ``motion``: (commands in order, the
     ``set_animation`` command)."""
-    robot = view.inputs.robot
     soups = plan_soups(view, source, max_faces=MAX_FACES)
     frames = key_frames(view)
     b = np.array([bounds(frame_soup(view, soups, kf.q, kf.X_WO)) for kf in frames])
@@ -219,7 +218,7 @@ def scene_commands(view: PlanView, motion: Motion, source: str = "visual") -> tu
         cmds += shape_commands(obj, _path("plan", "goal", "mesh"), opacity=GOAL_OPACITY)
         cmds.append(_set_transform(goal.X_WO, _path("plan", "goal")))
 
-    X_WL = np.array([link_poses(robot, soups.links, q) for q in motion.q])  # (m, L, 4, 4)
+    X_WL = np.array([link_poses(view.kin, soups.links, q) for q in motion.q])  # (m, L, 4, 4)
     tracks = {}
     for i, ls in enumerate(soups.links):
         node = _path("plan", "robot", ls.link)

@@ -24,6 +24,7 @@ from regrasp_cli.motion.timing import evaluate_trajectory
 from regrasp_cli.show.geometry import (LinkShapes, Soup, link_poses, mesh_shape, obstacle_shapes, robot_links,
                                        robot_soup, shapes_soup)
 from regrasp_cli.manip.modes import Kind
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.replay import Carry, Inputs, follow, load_inputs
 from regrasp_cli.trajectory import Plan, read_plan
 
@@ -39,6 +40,7 @@ class PlanView:
     plan: Plan
     inputs: Inputs  # robot, object mesh (frame O), obstacles, timing limits
     carries: tuple[Carry, ...]  # per phase: the object static in W, or held by a hand
+    kin: Kinematics  # FK scratch of this view (one pinocchio Data)
 
     @property
     def duration(self) -> float:
@@ -46,7 +48,7 @@ class PlanView:
 
     def X_WO(self, phase: int, q: np.ndarray) -> np.ndarray:
         """Object pose (4, 4) during phase ``phase`` at configuration q (nq,)."""
-        return self.carries[phase].X_WO(self.inputs.robot, q)
+        return self.carries[phase].X_WO(self.kin, q)
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,8 +91,9 @@ def load_plan_view(path: str | Path) -> PlanView:
     if not plan.phases:
         raise InputError(path, "phases", "no phase: there is no motion to show")
     inputs = load_inputs(plan, path)
-    carries, _ = follow(path, plan, inputs.robot)  # issues are the validator's business
-    return PlanView(path, plan, inputs, tuple(carries))
+    kin = Kinematics(inputs.robot)
+    carries, _ = follow(path, plan, kin)  # issues are the validator's business
+    return PlanView(path, plan, inputs, tuple(carries), kin)
 
 
 def sample_times(view: PlanView, fps: float) -> np.ndarray:
@@ -201,7 +204,7 @@ def plan_soups(view: PlanView, source: str = "visual", max_edge: float | None = 
 
 def frame_soup(view: PlanView, soups: PlanSoups, q: np.ndarray, X_WO: np.ndarray) -> Soup:
     """Everything in W at configuration q (nq,) with the object at X_WO (4, 4)."""
-    X_WL = link_poses(view.inputs.robot, soups.links, q)
+    X_WL = link_poses(view.kin, soups.links, q)
     return Soup.join([soups.obstacles, robot_soup(soups.links, X_WL, soups.link_soups), soups.object.moved(X_WO)])
 
 

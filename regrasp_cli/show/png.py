@@ -19,6 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.show.geometry import (VIEW_DIRECTION, Soup, bounds, hand_links, link_poses, mesh_shape,
                                        robot_links, robot_soup, shapes_soup)
 from regrasp_cli.show.motion import KeyFrame, PlanView, frame_soup, holding_text, key_frames, plan_soups
@@ -154,8 +155,9 @@ def hand_soup_in_grasp_frame(robot, hand: str, finger_q: np.ndarray, source: str
     h = robot.hands[hand]
     q = robot.q_rest.copy()
     q[h.idx] = finger_q
-    X_GW = inverse(robot.fk(q, h.grasp_frame))
-    return robot_soup(links, X_GW @ link_poses(robot, links, q))
+    kin = Kinematics(robot)
+    X_GW = inverse(kin.fk(q, h.grasp_frame))
+    return robot_soup(links, X_GW @ link_poses(kin, links, q))
 
 
 def grasps_png(glist, object_mesh, best: int = 10, robot=None, size_per_grasp: int = 320,

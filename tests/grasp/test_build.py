@@ -29,6 +29,7 @@ from regrasp_cli.grasp.quality import combine_scores, force_closure, primitive_w
 from regrasp_cli.grasp.single import GraspOptions
 from regrasp_cli.grasp.surface import build_surface, sampling_step
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.scene import load_problem
 from regrasp_cli.spatial import inverse, rotation_angle
 from regrasp_cli.store import read_artefact, read_provenance
@@ -159,9 +160,9 @@ def test_fingertips_are_at_the_contacts_by_fk(problem, glist):
     worst = 0.0
     for g in range(len(glist)):
         q = _q(problem, glist.finger_q[g])
-        X_WG = robot.fk(q, h.grasp_frame)
+        X_WG = Kinematics(robot).fk(q, h.grasp_frame)
         X_OW = inverse(X_WG @ inverse(glist.X_OG[g]))
-        tips = robot.fk_many(q, h.tip_frames)
+        tips = Kinematics(robot).fk_many(q, h.tip_frames)
         for f, spec in enumerate(h.spec.fingers):
             if not glist.in_contact[g, f]:
                 continue

@@ -13,6 +13,7 @@ import pytest
 from regrasp_cli.grasp import workspace as ws_mod
 from regrasp_cli.grasp.workspace import WorkspaceOptions, fit_spheres, hand_workspace, tip_positions
 from regrasp_cli.model.ik import IKOptions, solve_position
+from regrasp_cli.model.robot import Kinematics
 
 HAND = "right"
 OPTIONS = WorkspaceOptions()
@@ -92,7 +93,7 @@ def test_every_sphere_lies_inside_the_reachable_workspace(robot, fingers, finger
     w = fingers[finger]
     idx, tip = h.finger_idx[finger], h.tip_frames[finger]
     q0 = _open_q(robot)
-    X_WG = robot.fk(q0, h.grasp_frame)
+    X_WG = Kinematics(robot).fk(q0, h.grasp_frame)
     rng = np.random.default_rng(0)
     misses = []
     for i, (c, r) in enumerate(zip(w.centres, w.radii)):

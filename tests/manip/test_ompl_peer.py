@@ -34,6 +34,7 @@ from regrasp_cli.manip.modes import Kind  # noqa: E402
 from regrasp_cli.manip.queries import QueryFailed, QueryStats  # noqa: E402
 from regrasp_cli.manip.status import Stage  # noqa: E402
 from regrasp_cli.manip.tasks.handover import TRANSITIONS, phase_worlds, plan  # noqa: E402
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.motion.local import joint_reach, joint_weights  # noqa: E402
 from regrasp_cli.motion.rrt import RRTOptions  # noqa: E402
 from regrasp_cli.trajectory import Phase  # noqa: E402
@@ -74,7 +75,7 @@ def blocked(problem):
     b swing the right shoulder (r_arm_j1) 0.5 rad either side, through the object."""
     robot = problem.robot
     X_WO = np.eye(4)
-    X_WO[:3, 3] = robot.fk(robot.q_rest, robot.hands["right"].grasp_frame)[:3, 3] - [0, 0, 0.11]
+    X_WO[:3, 3] = Kinematics(robot).fk(robot.q_rest, robot.hands["right"].grasp_frame)[:3, 3] - [0, 0, 0.11]
     a, b = _q(problem, r_arm_j1=-0.5), _q(problem, r_arm_j1=0.5)
     assert not dense_collisions(problem, X_WO, [a]) and not dense_collisions(problem, X_WO, [b])
     assert dense_collisions(problem, X_WO, [a, b])

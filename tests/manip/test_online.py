@@ -41,6 +41,7 @@ from regrasp_cli.manip.solve import TransitionStats
 from regrasp_cli.manip.status import Stage
 from regrasp_cli.manip.tasks import handover
 from regrasp_cli.manip.tasks.handover import TRANSITIONS, _object_shape, exchange_pose, grasp_id, phase_worlds, plan
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.motion.local import distance, joint_reach, joint_weights
 from regrasp_cli.motion.rrt import RRTOptions
 from regrasp_cli.spatial import inverse, pose_error, rotation_angle
@@ -215,7 +216,7 @@ def test_single_configuration_grasps_at_the_grasp_pose(problem, lists, single):
     _, c = single
     robot, h, g = problem.robot, problem.robot.hands["right"], lists["right"]
     assert (c.hand, c.X_WO.tolist()) == ("right", problem.spec.task.X_WO_start.tolist())
-    dp, da = pose_error(robot.fk(c.q_closed, h.grasp_frame), c.X_WO @ g.X_OG[c.grasp])
+    dp, da = pose_error(Kinematics(robot).fk(c.q_closed, h.grasp_frame), c.X_WO @ g.X_OG[c.grasp])
     assert dp <= POSE_TOL[0] and da <= POSE_TOL[1], (dp, da)
     assert np.array_equal(c.q_closed[h.idx], g.finger_q[c.grasp])
     assert robot.within_limits(c.q_closed)
@@ -242,7 +243,7 @@ def test_approach_starts_open_and_ends_preshaped_at_the_grasp_pose(problem, list
     others = np.setdiff1d(np.arange(robot.nq), h.idx)
     assert np.array_equal(end[others], c.q_closed[others])  # the hand is at the grasp pose
     # it starts approach_distance away, with the same orientation
-    X_end, X_start = robot.fk(end, h.grasp_frame), robot.fk(c.approach[0], h.grasp_frame)
+    X_end, X_start = Kinematics(robot).fk(end, h.grasp_frame), Kinematics(robot).fk(c.approach[0], h.grasp_frame)
     assert np.linalg.norm(X_start[:3, 3] - X_end[:3, 3]) == pytest.approx(scratch.options.approach_distance, abs=1e-3)
     assert rotation_angle(X_start[:3, :3].T @ X_end[:3, :3]) <= POSE_TOL[1]
     # only the grasping arm and hand move
@@ -256,9 +257,9 @@ def test_lift_raises_the_object_by_lift_height(problem, lists, single):
     X_GO = inverse(lists["right"].X_OG[c.grasp])
     assert np.array_equal(c.lift[0], c.q_closed)
     assert np.all(c.lift[:, h.idx] == c.q_closed[h.idx])  # the fingers stay closed
-    z = [(robot.fk(q, h.grasp_frame) @ X_GO)[2, 3] for q in c.lift]
+    z = [(Kinematics(robot).fk(q, h.grasp_frame) @ X_GO)[2, 3] for q in c.lift]
     assert np.all(np.diff(z) > 0)
-    X_lifted = robot.fk(c.lift[-1], h.grasp_frame) @ X_GO
+    X_lifted = Kinematics(robot).fk(c.lift[-1], h.grasp_frame) @ X_GO
     dp, da = pose_error(X_lifted, translated(c.X_WO, [0, 0, scratch.options.lift_height]))
     assert dp <= POSE_TOL[0] and da <= POSE_TOL[1], (dp, da)
 
@@ -266,14 +267,14 @@ def test_lift_raises_the_object_by_lift_height(problem, lists, single):
 def test_cartesian_line_moves_the_grasp_frame_on_a_straight_line(problem, single):
     scratch, c = single
     robot, h = problem.robot, problem.robot.hands["right"]
-    X_end = robot.fk(c.q_closed, h.grasp_frame)
+    X_end = Kinematics(robot).fk(c.q_closed, h.grasp_frame)
     X_far = translated(X_end, [0.05, -0.03, 0.08])
     steps = 4
     line = cartesian_line(scratch, np.random.default_rng(0), "right", c.q_closed, X_far, steps)
     assert line is not None and line.shape == (steps + 1, robot.nq)
     assert np.array_equal(line[-1], c.q_closed)
     for i, q in enumerate(line):  # from X_far (i = 0) to X_end, evenly
-        X = robot.fk(q, h.grasp_frame)
+        X = Kinematics(robot).fk(q, h.grasp_frame)
         p_expected = X_far[:3, 3] + (i / steps) * (X_end[:3, 3] - X_far[:3, 3])
         assert np.linalg.norm(X[:3, 3] - p_expected) <= 1e-3, i
         assert rotation_angle(X[:3, :3].T @ X_end[:3, :3]) <= POSE_TOL[1], i  # orientation kept
@@ -458,7 +459,7 @@ def blocked(problem):
     short Super Graph edge n0-n1 next to it, go through the object; the detour n0-n2-n1
     raises the arm (r_arm_j2).  Returns (X_WO, a, b, roadmap)."""
     robot = problem.robot
-    X_WO = translated(np.eye(4), robot.fk(robot.q_rest, robot.hands["right"].grasp_frame)[:3, 3] - [0, 0, 0.11])
+    X_WO = translated(np.eye(4), Kinematics(robot).fk(robot.q_rest, robot.hands["right"].grasp_frame)[:3, 3] - [0, 0, 0.11])
     a, b = _q(problem, r_arm_j1=-0.5), _q(problem, r_arm_j1=0.5)
     nodes = np.array([_q(problem, r_arm_j1=-0.45), _q(problem, r_arm_j1=0.45), _q(problem, r_arm_j2=0.7)])
     full = static_world(problem, X_WO)

@@ -7,6 +7,8 @@ import pytest
 
 from conftest import ROOT
 
+from regrasp_cli.model.robot import Kinematics
+
 BAXTER = ROOT / "configs" / "robots" / "baxter" / "robot.yaml"
 
 
@@ -39,7 +41,7 @@ def test_baxter_rest_is_collision_free_with_srdf_matrix(baxter, tmp_path):
     # the right gripper sent where the left one is: the two hands collide
     from regrasp_cli.model.ik import arm_ik
 
-    X_left = baxter.fk(baxter.q_rest, baxter.hands["left"].grasp_frame)
+    X_left = Kinematics(baxter).fk(baxter.q_rest, baxter.hands["left"].grasp_frame)
     res = arm_ik(baxter, "right", X_left, baxter.q_rest, np.random.default_rng(0))
     assert res.success
     assert not world.is_free(res.q)
@@ -56,8 +58,8 @@ def test_baxter_ik_round_trip(baxter):
         hand = baxter.hands[side]
         for _ in range(5):
             q_target = baxter.sample(rng, hand.arm_idx)
-            X = baxter.fk(q_target, hand.grasp_frame)
+            X = Kinematics(baxter).fk(q_target, hand.grasp_frame)
             res = arm_ik(baxter, side, X, baxter.q_rest, rng)
             assert res.success
-            dp, dr = pose_error(baxter.fk(res.q, hand.grasp_frame), X)
+            dp, dr = pose_error(Kinematics(baxter).fk(res.q, hand.grasp_frame), X)
             assert dp < 1e-3 and dr < 1e-2

@@ -27,6 +27,7 @@ from regrasp_cli.model.collision import (
     segment_samples,
 )
 from regrasp_cli.model.ik import arm_ik
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
 
 DESK_TOP_Z = 0.74
@@ -76,7 +77,7 @@ def test_rest_is_free(problem, world):
 def test_right_hand_in_the_desk_collides(problem, world):
     robot = problem.robot
     h = robot.hands["right"]
-    X = robot.fk(robot.q_rest, h.grasp_frame)
+    X = Kinematics(robot).fk(robot.q_rest, h.grasp_frame)
     X[:3, 3] = [0.6, -0.4, DESK_TOP_Z - 0.05]
     res = arm_ik(robot, "right", X, robot.q_rest, np.random.default_rng(0))
     assert res.success
@@ -90,8 +91,8 @@ def test_right_hand_in_the_desk_collides(problem, world):
 def _hands_together(robot):
     """(right only, both): IK of both grasp frames, palms down, to one point in front of the
     chest (between the rest positions of the hands, or up to 10 cm closer to the chest)."""
-    mid = (robot.fk(robot.q_rest, robot.hands["right"].grasp_frame)[:3, 3]
-           + robot.fk(robot.q_rest, robot.hands["left"].grasp_frame)[:3, 3]) / 2
+    mid = (Kinematics(robot).fk(robot.q_rest, robot.hands["right"].grasp_frame)[:3, 3]
+           + Kinematics(robot).fk(robot.q_rest, robot.hands["left"].grasp_frame)[:3, 3]) / 2
     for dx in (0.0, -0.05, -0.1):
         rng = np.random.default_rng(0)
         X = _pose(np.diag([1.0, -1.0, -1.0]), mid + [dx, 0.0, 0.0])
@@ -154,7 +155,7 @@ def test_random_configurations_agree_with_fresh_queries(problem, world):
 def test_sphere_obstacle_at_a_fingertip_collides(problem):
     robot = problem.robot
     tip = robot.hands["right"].tip_frames[1]
-    p = robot.fk(robot.q_rest, tip)[:3, 3]
+    p = Kinematics(robot).fk(robot.q_rest, tip)[:3, 3]
     links = problem.disabled.links()
     w = CollisionWorld(robot, [_ball("ball", 0.01, p)], links)
     assert not w.is_free(robot.q_rest)
@@ -197,8 +198,8 @@ def _touching_world(problem, penetration: float, touching, tolerance: float = 0.
     finger, overlapping it by ``penetration`` (m)."""
     robot = problem.robot
     finger = robot.spec.hands["right"].fingers[1]
-    X_tip = robot.fk(robot.q_rest, finger.tip_link)
-    u = X_tip[:3, 3] - robot.fk(robot.q_rest, finger.joints[-1])[:3, 3]  # the finger's direction
+    X_tip = Kinematics(robot).fk(robot.q_rest, finger.tip_link)
+    u = X_tip[:3, 3] - Kinematics(robot).fk(robot.q_rest, finger.joints[-1])[:3, 3]  # the finger's direction
     u /= np.linalg.norm(u)
     helper = np.cross(u, [0.0, 0.0, 1.0] if abs(u[2]) < 0.9 else [1.0, 0.0, 0.0])
     R = np.column_stack([u, helper / np.linalg.norm(helper), np.cross(u, helper / np.linalg.norm(helper))])
@@ -232,7 +233,7 @@ def _held_cube_world(problem, support_gap: float, obstacles=()):
     """A 2 cm cube held by the right hand (at its grasp frame, axes aligned with W), and a
     4 x 4 x 2 cm support whose top is ``support_gap`` below the cube's bottom face."""
     robot = problem.robot
-    X_WG = robot.fk(robot.q_rest, robot.hands["right"].grasp_frame)
+    X_WG = Kinematics(robot).fk(robot.q_rest, robot.hands["right"].grasp_frame)
     X_GO = _pose(X_WG[:3, :3].T, [0.0, 0.0, 0.0])
     support = ObstacleSpec("support", "box", (0.04, 0.04, 0.02), _pose(np.eye(3), X_WG[:3, 3] - [0, 0, 0.02 + support_gap]))
     obj = ObjectPlacement(trimesh.creation.box(extents=[0.02, 0.02, 0.02]), X_GO, attached_to="right")
@@ -254,7 +255,7 @@ def test_held_object_moves_with_the_hand(problem):
     q = robot.q_rest.copy()
     q[robot.joint_index("r_arm_j1")] += 0.3
     _, X_GO = _held_cube_world(problem, 0.01)
-    X_WO = robot.fk(q, robot.hands["right"].grasp_frame) @ X_GO
+    X_WO = Kinematics(robot).fk(q, robot.hands["right"].grasp_frame) @ X_GO
     p = X_WO[:3, :3] @ [0.0, 0.0, 0.01] + X_WO[:3, 3]  # centre of the cube's top face at q
     w, _ = _held_cube_world(problem, 0.01, [_ball("pin", 0.004, p)])
     assert w.is_free(robot.q_rest)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from regrasp_cli.model.ik import IKOptions, arm_ik, finger_ik
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.spatial import pose_error
 
 N_TARGETS = 12
@@ -22,10 +23,10 @@ def test_arm_ik_round_trip(robot, hand):
     others = np.setdiff1d(np.arange(robot.nq), h.arm_idx)
     for k in range(N_TARGETS):
         q_target = robot.sample(targets_rng, h.arm_idx)
-        X_WG = robot.fk(q_target, h.grasp_frame)
+        X_WG = Kinematics(robot).fk(q_target, h.grasp_frame)
         res = arm_ik(robot, hand, X_WG, robot.q_rest, rng)
         assert res.success, f"target {k}: errors {res.position_error:.2g} m, {res.rotation_error:.2g} rad"
-        dp, dr = pose_error(robot.fk(res.q, h.grasp_frame), X_WG)
+        dp, dr = pose_error(Kinematics(robot).fk(res.q, h.grasp_frame), X_WG)
         assert dp <= POS_TOL and dr <= ROT_TOL, (k, dp, dr)
         assert res.position_error == pytest.approx(dp, abs=1e-9)
         assert robot.within_limits(res.q)
@@ -37,10 +38,10 @@ def test_arm_ik_with_torso_round_trip(robot):
     idx = np.concatenate([robot.groups["torso"], h.arm_idx])
     targets_rng, rng = np.random.default_rng(11), np.random.default_rng(12)
     for k in range(N_TARGETS):
-        X_WG = robot.fk(robot.sample(targets_rng, idx), h.grasp_frame)
+        X_WG = Kinematics(robot).fk(robot.sample(targets_rng, idx), h.grasp_frame)
         res = arm_ik(robot, "right", X_WG, robot.q_rest, rng, with_torso=True)
         assert res.success, k
-        dp, dr = pose_error(robot.fk(res.q, h.grasp_frame), X_WG)
+        dp, dr = pose_error(Kinematics(robot).fk(res.q, h.grasp_frame), X_WG)
         assert dp <= POS_TOL and dr <= ROT_TOL
         assert robot.within_limits(res.q)
         np.testing.assert_array_equal(res.q[robot.groups["left_arm"]], robot.q_rest[robot.groups["left_arm"]])
@@ -48,7 +49,7 @@ def test_arm_ik_with_torso_round_trip(robot):
 
 def test_arm_ik_is_deterministic_for_a_seed(robot):
     h = robot.hands["left"]
-    X_WG = robot.fk(robot.sample(np.random.default_rng(5), h.arm_idx), h.grasp_frame)
+    X_WG = Kinematics(robot).fk(robot.sample(np.random.default_rng(5), h.arm_idx), h.grasp_frame)
     a = arm_ik(robot, "left", X_WG, robot.q_rest, np.random.default_rng(3))
     b = arm_ik(robot, "left", X_WG, robot.q_rest, np.random.default_rng(3))
     np.testing.assert_array_equal(a.q, b.q)
@@ -65,10 +66,10 @@ def test_finger_ik_round_trip(robot, hand):
         others = np.setdiff1d(np.arange(robot.nq), idx)
         for k in range(3):
             q_target = robot.sample(targets_rng, idx)
-            p = robot.fk(q_target, h.tip_frames[finger])[:3, 3]
+            p = Kinematics(robot).fk(q_target, h.tip_frames[finger])[:3, 3]
             res = finger_ik(robot, hand, finger, p, robot.q_rest, rng)
             assert res.success, (finger, k, res.position_error)
-            err = np.linalg.norm(robot.fk(res.q, h.tip_frames[finger])[:3, 3] - p)
+            err = np.linalg.norm(Kinematics(robot).fk(res.q, h.tip_frames[finger])[:3, 3] - p)
             assert err <= POS_TOL
             assert robot.within_limits(res.q)
             np.testing.assert_array_equal(res.q[others], robot.q_rest[others])  # only that finger moved
@@ -78,7 +79,7 @@ def test_finger_ik_round_trip(robot, hand):
 
 def test_unreachable_arm_target(robot):
     h = robot.hands["right"]
-    X = robot.fk(robot.q_rest, h.grasp_frame)
+    X = Kinematics(robot).fk(robot.q_rest, h.grasp_frame)
     X[:3, 3] += [3.0, 0.0, 0.0]
     res = arm_ik(robot, "right", X, robot.q_rest, np.random.default_rng(0))  # default: 20 restarts
     assert not res.success
@@ -92,7 +93,7 @@ def test_unreachable_arm_target(robot):
 
 def test_unreachable_finger_target(robot):
     h = robot.hands["left"]
-    p = robot.fk(robot.q_rest, h.tip_frames[1])[:3, 3] + [0.0, 3.0, 0.0]
+    p = Kinematics(robot).fk(robot.q_rest, h.tip_frames[1])[:3, 3] + [0.0, 3.0, 0.0]
     res = finger_ik(robot, "left", 1, p, robot.q_rest, np.random.default_rng(0))
     assert not res.success
     assert res.position_error > 2.5

@@ -18,7 +18,7 @@ import yaml
 
 from regrasp_cli.errors import InputError
 from regrasp_cli.model.ik import arm_ik, finger_ik
-from regrasp_cli.model.robot import load_robot
+from regrasp_cli.model.robot import Kinematics, load_robot
 
 L1, L2, LF = 0.4, 0.3, 0.1  # m: upper arm, forearm, finger
 SHOULDER_Y, SHOULDER_Z = 0.3, 0.5
@@ -132,9 +132,9 @@ def test_fk_matches_closed_form(toy, side, t, q1, q2, qf):
     hand = toy.hands["right" if side == "r" else "left"]
     for frame, fid in (("grasp", hand.grasp_frame), ("tip", hand.tip_frames[0])):
         expected = closed_form(side, t, q1, q2, qf, frame)
-        np.testing.assert_allclose(toy.fk(q, fid), expected, atol=1e-9)
-        np.testing.assert_allclose(toy.fk(q, f"{side}_{frame}"), expected, atol=1e-9)  # by name
-    many = toy.fk_many(q, [hand.grasp_frame, hand.tip_frames[0]])
+        np.testing.assert_allclose(Kinematics(toy).fk(q, fid), expected, atol=1e-9)
+        np.testing.assert_allclose(Kinematics(toy).fk(q, f"{side}_{frame}"), expected, atol=1e-9)  # by name
+    many = Kinematics(toy).fk_many(q, [hand.grasp_frame, hand.tip_frames[0]])
     np.testing.assert_allclose(many[0], closed_form(side, t, q1, q2, qf, "grasp"), atol=1e-9)
     np.testing.assert_allclose(many[1], closed_form(side, t, q1, q2, qf, "tip"), atol=1e-9)
 
@@ -159,14 +159,14 @@ def test_toy_ik_through_the_continuous_joint(toy):
         hand = "right" if side == "r" else "left"
         for _ in range(5):
             q = toy.sample(rng)
-            p = toy.fk(q, f"{side}_tip")[:3, 3]
+            p = Kinematics(toy).fk(q, f"{side}_tip")[:3, 3]
             res = finger_ik(toy, hand, 0, p, _with(toy, q, f"{side}_f1"), rng)
             assert res.success
-            np.testing.assert_allclose(toy.fk(res.q, f"{side}_tip")[:3, 3], p, atol=1e-3)
-            target = toy.fk(q, f"{side}_grasp")
+            np.testing.assert_allclose(Kinematics(toy).fk(res.q, f"{side}_tip")[:3, 3], p, atol=1e-3)
+            target = Kinematics(toy).fk(q, f"{side}_grasp")
             res = arm_ik(toy, hand, target, _with(toy, q, f"{side}_j1", f"{side}_j2"), rng)
             assert res.success
-            np.testing.assert_allclose(toy.fk(res.q, f"{side}_grasp"), target, atol=1e-3)
+            np.testing.assert_allclose(Kinematics(toy).fk(res.q, f"{side}_grasp"), target, atol=1e-3)
 
 
 def _with(robot, q, *names):
@@ -227,4 +227,4 @@ def test_sample_is_within_limits_and_keeps_other_joints(robot):
 
 def test_fk_of_unknown_frame(robot):
     with pytest.raises(InputError):
-        robot.fk(robot.q_rest, "no_such_link")
+        Kinematics(robot).fk(robot.q_rest, "no_such_link")

@@ -9,6 +9,7 @@ import pinocchio as pin
 import pytest
 import trimesh
 
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.show.geometry import Shape, decimate, hand_links, link_poses, robot_links, shape_triangles, subdivide
 
 
@@ -32,7 +33,7 @@ def test_link_shapes_are_where_pinocchio_puts_the_geometry(robot, source):
         q = robot.sample(rng)
         pin.forwardKinematics(robot.model, data, robot.to_pin(q))
         pin.updateGeometryPlacements(robot.model, data, gmodel, gdata)
-        for ls, X_WL in zip(links, link_poses(robot, links, q)):
+        for ls, X_WL in zip(links, link_poses(Kinematics(robot), links, q)):
             for s in ls.shapes:
                 X_WS = gdata.oMg[gmodel.getGeometryId(s.name)].homogeneous
                 np.testing.assert_allclose(X_WL @ s.X_PS, X_WS, atol=1e-12)

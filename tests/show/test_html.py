@@ -13,6 +13,7 @@ import pytest
 import umsgpack
 
 from regrasp_cli.manip.modes import Kind
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.show.geometry import robot_links
 from regrasp_cli.show.html import pose_keys
 from regrasp_cli.spatial import inverse
@@ -80,7 +81,7 @@ def test_the_object_track_passes_through_the_exchange_pose(page, view):
     carry = next(p for p in view.plan.phases if p.kind == Kind.TRANSFER)
     (hand, gid), = carry.holding.items()
     robot = view.inputs.robot
-    X_exchange = robot.fk(carry.waypoints[-1], robot.hands[hand].grasp_frame) @ inverse(view.plan.grasp(gid).X_OG)
+    X_exchange = Kinematics(robot).fk(carry.waypoints[-1], robot.hands[hand].grasp_frame) @ inverse(view.plan.grasp(gid).X_OG)
     times = np.array([k["time"] / clip["fps"] for k in keys])
     values = np.array([k["value"] for k in keys])
     p = [np.interp(float(carry.times[-1]), times, values[:, j]) for j in range(3)]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from regrasp_cli.manip.modes import Kind
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.show.motion import KEY_FRAMES, frame_soup, key_frames, plan_soups, sample_motion, sample_times
 from regrasp_cli.spatial import inverse, pose_error
 
@@ -15,7 +16,7 @@ from regrasp_cli.spatial import inverse, pose_error
 def held_poses(view, phase: int, q: np.ndarray) -> dict[str, np.ndarray]:
     """Per hand holding the object in ``phase``: where its grasp puts the object (4, 4) at q."""
     robot = view.inputs.robot
-    return {hand: robot.fk(q, robot.hands[hand].grasp_frame) @ inverse(view.plan.grasp(gid).X_OG)
+    return {hand: Kinematics(robot).fk(q, robot.hands[hand].grasp_frame) @ inverse(view.plan.grasp(gid).X_OG)
             for hand, gid in view.plan.phases[phase].holding.items()}
 
 
@@ -95,7 +96,7 @@ def test_the_object_rests_or_rides_with_the_holding_hand(view):
             X_OG = view.plan.grasp(gid).X_OG
             assert view.plan.grasp(gid).hand == hand
             for r, X_WO in zip(rows, X):
-                X_GO = inverse(robot.fk(motion.q[r], robot.hands[hand].grasp_frame)) @ X_WO
+                X_GO = inverse(Kinematics(robot).fk(motion.q[r], robot.hands[hand].grasp_frame)) @ X_WO
                 dp, da = pose_error(X_GO, inverse(X_OG))
                 assert dp < 1e-3 and da < 1e-2, (phase.name, hand, motion.t[r], dp, da)
     carried = next(k for k, p in enumerate(view.plan.phases) if p.kind == Kind.TRANSFER)
