@@ -1,9 +1,9 @@
 """Process parallelism for the offline builds and the online stages.
 
 The workers are forked after the caller has built its (large, unpicklable) context —
-robot model, collision worlds, surface model, passed as ``context`` and read with
-:func:`shared` — so they inherit it instead of rebuilding it, and results come back in
-order, so a result is the same whatever the number of jobs.
+robot model, collision worlds, surface model, passed as ``context``, which each call
+receives as its first argument — so they inherit it instead of rebuilding it, and results
+come back in order, so a result is the same whatever the number of jobs.
 Only the work items and the results cross process boundaries.
 
 joblib (its ``multiprocessing`` backend, the one that forks, used as a context manager in
@@ -22,30 +22,31 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 
-_SHARED: list = [None]  # the context of the running map, inherited by the forked workers
+_RUNNING: list = [None]  # (fn, context) of the running map, inherited by the forked workers
 
 
-def shared() -> Any:
-    """The ``context`` given to the :func:`ordered_map` that is running ``fn``."""
-    return _SHARED[0]
+def _call(item):
+    fn, context = _RUNNING[0]
+    return fn(context, item)
 
 
-def ordered_map(fn: Callable[[T], R], items: Iterable[T], jobs: int, context: Any = None) -> Iterator[R]:
-    """``map(fn, items)`` over ``jobs`` forked processes (in this process when jobs <= 1),
-    in order.  ``fn`` must be a module-level function; it reads ``context`` (anything,
-    unpicklable included: the workers inherit it) with :func:`shared`.  Not for use from
-    several threads at once.  Stopping the iteration early terminates the workers."""
+def ordered_map(fn: Callable[[Any, T], R], items: Iterable[T], jobs: int, context: Any = None) -> Iterator[R]:
+    """``fn(context, item)`` for each item, over ``jobs`` forked processes (in this process
+    when jobs <= 1), in order.  ``context`` may be anything, unpicklable included: the
+    workers inherit it (and ``fn``) at the fork; only items and results are pickled.  Not
+    for use from several threads at once.  Stopping the iteration early terminates the
+    workers."""
     items = list(items)
-    previous, _SHARED[0] = _SHARED[0], context
+    previous, _RUNNING[0] = _RUNNING[0], (fn, context)
     try:
         if jobs <= 1 or len(items) <= 1:
-            yield from map(fn, items)
+            yield from map(_call, items)
             return
         pool = multiprocessing.get_context("fork").Pool(min(jobs, len(items)))
         try:
-            yield from pool.imap(fn, items)
+            yield from pool.imap(_call, items)
         finally:
             pool.terminate()
             pool.join()
     finally:
-        _SHARED[0] = previous
+        _RUNNING[0] = previous

@@ -13,7 +13,7 @@ import numpy as np
 
 from regrasp_cli.config import SceneSpec, load_scene_spec
 from regrasp_cli.errors import InputError
-from regrasp_cli.model.collision import CollisionOptions, CollisionWorld, ObjectPlacement
+from regrasp_cli.model.collision import CollisionOptions, CollisionWorld, ObjectPlacement, collision_world
 from regrasp_cli.model.objects import ObjectMesh, load_object_mesh
 from regrasp_cli.model.robot import Robot, load_robot
 from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
@@ -35,7 +35,7 @@ class Problem:
 
     def world(self, obj: ObjectPlacement | None = None) -> CollisionWorld:
         """Self-collision + static obstacles (+ the object placed as given)."""
-        return CollisionWorld(self.robot, self.spec.obstacles, self.disabled.links(), obj, self.collision_options)
+        return collision_world(self.robot, self.spec.obstacles, self.disabled.links(), obj, self.collision_options)
 
     def object_at(self, X_WO: np.ndarray) -> ObjectPlacement:
         """The object resting at X_WO (4, 4), as a static obstacle."""

@@ -41,11 +41,11 @@ import trimesh
 
 from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
 from regrasp_cli.manip.modes import Kind
-from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
+from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collision_world
 from regrasp_cli.model.robot import Kinematics, Robot
 from regrasp_cli.motion.local import held_reach, joint_reach
 from regrasp_cli.motion.timing import segment_duration
-from regrasp_cli.parallel import ordered_map, shared
+from regrasp_cli.parallel import ordered_map
 from regrasp_cli.replay import JOINT_TOL, Carry, Inputs, follow, load_inputs
 from regrasp_cli.spatial import inverse, pose_error
 from regrasp_cli.trajectory import Phase, Plan, PlanGrasp, read_plan
@@ -263,8 +263,8 @@ def phase_world(inputs: Inputs, phase: Phase, carry: Carry, pair_filter=None) ->
     ``pair_filter(a, b)`` accepts, see :class:`CollisionWorld`)."""
     touching = tuple(dict.fromkeys((*phase.holding, *phase.touching)))
     obj = ObjectPlacement(inputs.mesh, carry.X_PO, carry.hand, touching)
-    return CollisionWorld(inputs.robot, inputs.obstacles, inputs.disabled, obj, inputs.options,
-                          pair_filter=pair_filter)
+    return collision_world(inputs.robot, inputs.obstacles, inputs.disabled, obj, inputs.options,
+                           pair_filter=pair_filter)
 
 
 def rigid_links(robot: Robot, phase: Phase, carry: Carry) -> frozenset[str]:
@@ -369,8 +369,7 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
 # ------------------------------------------------------------------ the whole plan
 
 
-def _phase_collisions(k: int) -> tuple[list[Issue], int, float]:
-    j = shared()
+def _phase_collisions(j: dict, k: int) -> tuple[list[Issue], int, float]:
     t0 = perf_counter()
     phase, carry, inputs = j["plan"].phases[k], j["carries"][k], j["inputs"]
     reach = j["reach"]

@@ -1,6 +1,6 @@
-"""The outputs of a benchmark: the Markdown summary, the same tables with rich, and the
-plot of time per phase per planner (matplotlib, PNG), all from run records through
-:mod:`regrasp_cli.bench.aggregate`."""
+"""The outputs of a benchmark: the Markdown summary and its table rows (which `regrasp
+bench` also draws with rich), and the plot of time per phase per planner (matplotlib,
+PNG), all from run records through :mod:`regrasp_cli.bench.aggregate`."""
 
 from __future__ import annotations
 
@@ -208,28 +208,6 @@ def docs_block(records: list[dict], meta: dict, reference: str = "roadmap") -> s
         L += _md(RATIO_COLUMNS, rr)
     L += paper_section(records, meta.get("offline", {}), reference)
     return "\n".join(L) + "\n"
-
-
-def print_tables(records: list[dict], console, reference: str = "roadmap", offline: dict | None = None) -> None:
-    from rich.table import Table
-
-    def table(title, columns, rows):
-        t = Table(title=title)
-        for c in columns:
-            t.add_column(c, justify="left" if c in ("scene", "planner", "query", "failures", "") else "right")
-        for row in rows:
-            t.add_row(*map(str, row))
-        console.print(t)
-
-    table("Runs (times over solved runs, s)", SUMMARY_COLUMNS, summary_rows(records, reference))
-    rr = ratio_rows(records, reference)
-    if rr:
-        table(f"Ratio to {reference} per seed (total time)", RATIO_COLUMNS, rr)
-    for (scene, planner), rows in table_one_rows(records).items():
-        table(f"Table I: {scene}, {planner} (medians over solved runs)", TABLE_ONE_COLUMNS, rows)
-    for scene in ordered(r["scene"] for r in records):
-        if select(records, scene, reference):
-            table(f"Next to the paper: {scene}", PAPER_COLUMNS, paper_rows(records, offline or {}, scene, reference))
 
 
 def plot_png(records: list[dict], title: str) -> bytes:

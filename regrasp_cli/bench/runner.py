@@ -136,10 +136,21 @@ def offline_stages(suite: Suite, cache_dir: Path, jobs: int, builder=None) -> di
 # ------------------------------------------------------------------ one run
 
 
+def _stamp(scene_file: str, cache_dir: str) -> tuple:
+    """When the scene file and the cached artefacts last changed: part of the key of the
+    worker's context, so that a reused worker never plans with inputs since rebuilt (the
+    parent rebuilds stale artefacts, which changes their files)."""
+    files = [Path(scene_file), *sorted(Path(cache_dir).glob("grasps/*.h5")),
+             *sorted(Path(cache_dir).glob("roadmap/*.h5"))]
+    return tuple((str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in files if p.exists())
+
+
 @functools.lru_cache(maxsize=4)
-def _context(scene_file: str, cache_dir: str, with_roadmap: bool, roadmap_nodes: int, grasp_target: int | None):
+def _context(scene_file: str, cache_dir: str, with_roadmap: bool, roadmap_nodes: int, grasp_target: int | None,
+             stamp: tuple):
     """Problem, grasp lists, Roadmap (or None), artefact hashes and path-length weights of
-    a scene, loaded once per worker process (the parent built the artefacts)."""
+    a scene, loaded once per worker process (the parent built the artefacts) and again
+    whenever the ``stamp`` of its inputs changes."""
     from regrasp_cli.artefacts import load_artefacts
     from regrasp_cli.manip.queries import Roadmap
     from regrasp_cli.motion.local import joint_weights
@@ -194,7 +205,8 @@ def execute(item: RunItem) -> dict:
     from regrasp_cli.validate import validate_plan
 
     problem, lists, roadmap, hashes, weights = _context(item.scene_file, item.cache_dir, item.planner == REFERENCE,
-                                                        item.roadmap_nodes, item.grasp_target)
+                                                        item.roadmap_nodes, item.grasp_target,
+                                                        _stamp(item.scene_file, item.cache_dir))
     rec = _base(item)
     # the same RRT-Connect budget for every planner; OMPL's wall-clock guard is the run's budget
     default = OnlineOptions()

@@ -108,7 +108,7 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
                planners: str | None, budget_s: float | None, console: Console, client,
                iterations: int | None = None) -> list[dict]:
     from regrasp_cli.bench.ompllog import scene_logs
-    from regrasp_cli.bench.report import markdown, plot_png, print_tables
+    from regrasp_cli.bench.report import markdown, plot_png
     from regrasp_cli.bench.runner import items_of, offline_stages, run_items
     from regrasp_cli.commands.report import CliBuilder
 
@@ -170,3 +170,30 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
     print_tables(records, console, REFERENCE, offline)
     console.print(f"results: {out_dir}/ (runs.jsonl, summary.md, times.png, meta.json, ompl/*.log, plans/)")
     return records
+
+
+def print_tables(records: list[dict], console: Console, reference: str = "roadmap",
+                 offline: dict | None = None) -> None:
+    """The tables of the Markdown summary (bench.report), drawn with rich."""
+    from rich.table import Table
+    from regrasp_cli.bench.aggregate import TABLE_ONE_COLUMNS, ordered, select
+    from regrasp_cli.bench.report import (PAPER_COLUMNS, RATIO_COLUMNS, SUMMARY_COLUMNS, paper_rows, ratio_rows,
+                                          summary_rows, table_one_rows)
+
+    def table(title, columns, rows):
+        t = Table(title=title)
+        for c in columns:
+            t.add_column(c, justify="left" if c in ("scene", "planner", "query", "failures", "") else "right")
+        for row in rows:
+            t.add_row(*map(str, row))
+        console.print(t)
+
+    table("Runs (times over solved runs, s)", SUMMARY_COLUMNS, summary_rows(records, reference))
+    rr = ratio_rows(records, reference)
+    if rr:
+        table(f"Ratio to {reference} per seed (total time)", RATIO_COLUMNS, rr)
+    for (scene, planner), rows in table_one_rows(records).items():
+        table(f"Table I: {scene}, {planner} (medians over solved runs)", TABLE_ONE_COLUMNS, rows)
+    for scene in ordered(r["scene"] for r in records):
+        if select(records, scene, reference):
+            table(f"Next to the paper: {scene}", PAPER_COLUMNS, paper_rows(records, offline or {}, scene, reference))

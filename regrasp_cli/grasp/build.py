@@ -18,8 +18,8 @@ from __future__ import annotations
 import re
 import time
 from dataclasses import asdict, dataclass, field
-from functools import lru_cache
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -27,8 +27,8 @@ from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, grasp_for_frame
-from regrasp_cli.grasp.surface import build_surface, sampling_step
-from regrasp_cli.grasp.workspace import WorkspaceOptions, hand_workspace
+from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
+from regrasp_cli.grasp.workspace import FingerWorkspace, WorkspaceOptions, hand_workspace
 from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.parallel import ordered_map
 from regrasp_cli.scene import Problem, load_problem
@@ -103,29 +103,35 @@ def artefact_path(cache_dir: Path, problem: Problem, hand: str, options: BuildOp
 # ------------------------------------------------------------------ per-process work
 
 
-@lru_cache(maxsize=4)
-def _context(scene: str, cache_dir: str, hand: str, options: BuildOptions):
+class _Search(NamedTuple):
     """Everything a worker needs, built once in the parent and inherited by forked workers."""
-    problem = load_problem(scene, Path(cache_dir))
+
+    problem: Problem
+    surface: Surface
+    workspaces: tuple[FingerWorkspace, ...]  # per finger
+    hand_model: HandModel
+    rho: float  # m: torque scale (half the object's bounding-box diagonal)
+    frames: np.ndarray  # (n, 4, 4) candidate grasp frames X_OG
+    options: BuildOptions
+
+
+def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> _Search:
+    problem = load_problem(scene, cache_dir)
     robot = problem.robot
     if hand not in robot.hands:
         raise InputError(robot.spec.file, "hands", f"the robot has no {hand} hand (it has: {', '.join(robot.hands)})")
     tip_radius = min(f.tip_radius for f in robot.hands[hand].spec.fingers)
     surface = build_surface(problem.object.mesh, sampling_step(tip_radius), np.random.default_rng(options.seed))
-    ws = hand_workspace(robot, hand, options.workspace, Path(cache_dir))
+    ws = hand_workspace(robot, hand, options.workspace, cache_dir)
     hm = HandModel(robot, hand, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance)
     hm.voxels(ws)  # built here, so that forked workers inherit them
     rho = float(np.linalg.norm(problem.object.extents) / 2)
     frames = grasp_frames(problem.object.mesh.bounds, options.grasp.n_positions, options.grasp.n_orientations)
-    return problem, surface, ws, hm, rho, frames
+    return _Search(problem, surface, ws, hm, rho, frames, options)
 
 
-def _run_chunk_star(args):
-    return _run_chunk(*args)
-
-
-def _run_chunk(scene: str, cache_dir: str, hand: str, options: BuildOptions, indices: np.ndarray):
-    problem, surface, ws, hm, rho, frames = _context(scene, cache_dir, hand, options)
+def _run_chunk(context: _Search, indices: np.ndarray):
+    problem, surface, ws, hm, rho, frames, options = context
     friction = problem.spec.object.friction
     grasps, stats = [], {}
     for i in indices:
@@ -165,7 +171,8 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     scene, cache_dir = Path(scene).resolve(), Path(cache_dir).resolve()
     cache_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    problem, surface, ws, _, _, frames = _context(str(scene), str(cache_dir), hand, options)
+    context = _context(scene, cache_dir, hand, options)
+    problem, frames = context.problem, context.frames
     t_prep = time.perf_counter() - t0
 
     n = len(frames)
@@ -179,8 +186,7 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     # (about 1 s each); chunks still in flight when the target is reached are dropped.
     order = _frame_order(n // options.grasp.n_orientations, options.grasp.n_orientations)
     chunks = [order[i:i + CHUNK] for i in range(0, n, CHUNK)]
-    args = [(str(scene), str(cache_dir), hand, options, c) for c in chunks]
-    outputs = ordered_map(_run_chunk_star, args, options.jobs)
+    outputs = ordered_map(_run_chunk, chunks, options.jobs, context)
     for chunk, out in zip(chunks, outputs):
         results.append(out)
         done += len(chunk)

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
+from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collision_world
 from regrasp_cli.model.ik import IKOptions
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.manip.handshape import palm_and_finger_links
@@ -109,9 +109,8 @@ class Scratch:
                 return base(a, b) and not ("object" in (a, b) and (a in rigid or b in rigid))
 
             margin = margin_rule(p.robot, self.local.margin) if certified else None
-            w = CollisionWorld(p.robot, p.spec.obstacles, p.disabled.links(), obj, p.collision_options,
-                               pair_filter=keep, margin=margin)
-            w.owner = None
+            w = collision_world(p.robot, p.spec.obstacles, p.disabled.links(), obj, p.collision_options,
+                                pair_filter=keep, margin=margin)
             self.worlds[k] = w
         return Placed(w, X_PO, (X_PO, attached, tuple(touching), pair_filter, key))
 
@@ -142,7 +141,7 @@ class Scratch:
 
 class Placed:
     """A collision world with the object at a given placement: the interface of
-    :class:`CollisionWorld` the planners use, moving the shared world's object first
+    :class:`CollisionWorld` the planners use, moving the run's world's object first
     when another placement used it last."""
 
     def __init__(self, world: CollisionWorld, X_PO: np.ndarray | None, spec: tuple = ()):
@@ -151,10 +150,8 @@ class Placed:
 
     def _place(self) -> CollisionWorld:
         w = self.world
-        if w.owner is not self:
-            if self.X_PO is not None and (w.owner is None or not np.array_equal(w.owner.X_PO, self.X_PO)):
-                w.set_object_pose(self.X_PO)
-            w.owner = self
+        if self.X_PO is not None and w.X_PO is not self.X_PO and not np.array_equal(w.X_PO, self.X_PO):
+            w.set_object_pose(self.X_PO)
         return w
 
     def is_free(self, q: np.ndarray) -> bool:

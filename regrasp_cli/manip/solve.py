@@ -24,7 +24,7 @@ from regrasp_cli.manip.ompl_peer import ompl_query
 from regrasp_cli.manip.queries import PhaseWorlds, QueryFailed, QueryStats, Roadmap, roadmap_query, rrt_query
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.motion.timing import time_parameterise
-from regrasp_cli.parallel import ordered_map, shared
+from regrasp_cli.parallel import ordered_map
 
 
 @dataclass(frozen=True)
@@ -121,9 +121,8 @@ def check_ends(scratch: Scratch, ends) -> None:
                 raise PlanningFailed(Stage.ENDS, f"the robot's {what} configuration {fault} ({pairs}){need}")
 
 
-def _query_job(i: int) -> QueryResult:
-    """Query ``i`` of the current batch (in a forked worker, or in this process)."""
-    j = shared()
+def _query_job(j: dict, i: int) -> QueryResult:
+    """Query ``i`` of the batch ``j`` (in a forked worker, or in this process)."""
     scratch, roadmap, query = j["scratch"], j["roadmap"], j["queries"][i]
     rng = np.random.default_rng(j["streams"][i])
     qs, before = QueryStats(), scratch.checks

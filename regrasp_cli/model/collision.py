@@ -1,9 +1,9 @@
 """Collision world: robot self-collision, static obstacles and the manipulated object.
 
-One :class:`CollisionWorld` is an immutable description of which geometry pairs are
-checked and with which tolerance; it owns the pinocchio/coal scratch data needed to check
-configurations (like pinocchio's Model/Data split, the scratch is private and holds no
-query state).  Checks go through pinocchio + coal's broadphase manager (a dynamic AABB
+A :class:`CollisionModel` is the immutable description of which geometry pairs are
+checked and with which tolerance; a :class:`CollisionWorld` made from it is the scratch of
+one worker or query (pinocchio data, coal geometry data and broadphase manager, where the
+object is), like pinocchio's Model/Data split.  Checks go through pinocchio + coal's broadphase manager (a dynamic AABB
 tree) with early exit at the first collision: on the default robot this is the fastest of
 the back-ends we measured (``scripts/bench_collision.py``, docs/BENCHMARKS.md).
 
@@ -117,123 +117,185 @@ def eroded_geometry(geom: coal.CollisionGeometry, tol: float) -> coal.CollisionG
     return None
 
 
-class CollisionWorld:
-    """Checks full-robot configurations against the robot itself, obstacles and the object."""
+@dataclass(frozen=True, eq=False)
+class CollisionModel:
+    """Which geometry pairs are checked, with which tolerances and clearances: the model
+    side of pinocchio's Model/Data split, immutable and shared by every query.  Build with
+    :func:`collision_model`; check configurations with a :class:`CollisionWorld` made
+    from it (the per-query data side)."""
 
-    def __init__(self, robot: Robot, obstacles: Sequence[ObstacleSpec] = (),
-                 disabled_links: Iterable[tuple[str, str]] = (), obj: ObjectPlacement | None = None,
-                 options: CollisionOptions = CollisionOptions(),
-                 pair_filter: Callable[[str, str], bool] | None = None,
-                 margin: Callable[[str, str], float] | None = None,
-                 links: Callable[[str], bool] | None = None):
-        """``pair_filter(a, b)``, when given, keeps only the pairs it accepts; ``a`` and ``b``
-        are link names, ``"obstacle:NAME"`` or ``"object"`` (used by the roadmap to check only
-        what an elementary roadmap did not already check).  ``margin(a, b)`` (m, >= 0) is a
-        clearance the pair must keep (coal security margin), used by certified segment checks.
-        ``links(name)``, when given, leaves out the robot links it rejects altogether."""
-        self.robot, self.obstacles, self.object, self.options = robot, tuple(obstacles), obj, options
-        if links is None:
-            gm = robot.collision_model.copy()
-        else:  # only the robot geometries of the given links: a smaller broadphase
-            gm = pin.GeometryModel()
-            for g, go in enumerate(robot.collision_model.geometryObjects):
-                if links(robot.link_of_geometry(g)):
-                    gm.addGeometryObject(go.copy())
-        n_robot = gm.ngeoms
-        self.robot_geoms = np.arange(n_robot)
-        self.obstacle_geoms = []
-        for ob in self.obstacles:
-            X = ob.X_WO
-            go = pin.GeometryObject(f"obstacle:{ob.name}", 0, 0, pin.SE3(X[:3, :3].copy(), X[:3, 3].copy()),
-                                    obstacle_geometry(ob))
-            self.obstacle_geoms.append(gm.addGeometryObject(go))
-        self.object_geom = None
-        self._alias: dict[int, int] = {}  # eroded copy -> original geometry
-        if obj is not None:
-            if obj.attached_to is None:
-                joint, frame, X_JO = 0, 0, obj.X_PO
-            else:
-                fid = robot.hands[obj.attached_to].grasp_frame
-                f = robot.model.frames[fid]
-                joint, frame = f.parentJoint, fid
-                X_JO = f.placement.homogeneous @ obj.X_PO
-            go = pin.GeometryObject("object", joint, frame, pin.SE3(X_JO[:3, :3].copy(), X_JO[:3, 3].copy()),
-                                    mesh_geometry(obj.mesh))
-            self.object_geom = gm.addGeometryObject(go)
-            self._X_JP = X_JO @ inverse(obj.X_PO)  # parent frame P (W or G) in the object's joint
+    robot: Robot
+    obstacles: tuple[ObstacleSpec, ...]
+    object: ObjectPlacement | None
+    options: CollisionOptions
+    geometry_model: pin.GeometryModel  # robot, obstacles, eroded copies, the object at object.X_PO
+    margins: np.ndarray  # (n_pairs,) m: coal security margin (clearance) of each collision pair
+    n_robot: int  # the robot geometries come first in geometry_model
+    obstacle_geoms: tuple[int, ...]
+    object_geom: int | None
+    alias: dict  # eroded copy -> original geometry index
+    X_JP: np.ndarray | None  # (4, 4) the object's parent frame P (W or G) in its joint frame
 
-        disabled = {frozenset(p) for p in disabled_links}
-        link = [robot.model.frames[gm.geometryObjects[g].parentFrame].name for g in range(n_robot)]
-        root_fixed = [gm.geometryObjects[g].parentJoint == 0 for g in range(n_robot)]
-        keep = pair_filter or (lambda a, b: True)
-        obstacle_name = {o: gm.geometryObjects[o].name for o in self.obstacle_geoms}
-
-        def add(a: int, b: int, name_a: str, name_b: str) -> None:
-            if keep(name_a, name_b):
-                gm.addCollisionPair(pin.CollisionPair(a, b))
-
-        for a in range(n_robot):
-            for b in range(a + 1, n_robot):
-                if frozenset((link[a], link[b])) not in disabled and link[a] != link[b]:
-                    add(a, b, link[a], link[b])
-        for a in range(n_robot):
-            if root_fixed[a]:
-                continue
-            for o in self.obstacle_geoms:
-                add(a, o, link[a], obstacle_name[o])
-        if obj is not None:
-            touching = set(obj.touching) | ({obj.attached_to} if obj.attached_to else set())
-            tips = {robot.model.frames[f].name for h in touching for f in robot.hands[h].tip_frames}
-            for a in range(n_robot):
-                if keep(link[a], "object"):
-                    g = self._eroded(gm, a, options.contact_tolerance) if link[a] in tips else a
-                    gm.addCollisionPair(pin.CollisionPair(g, self.object_geom))
-            if obj.attached_to is not None:
-                for o in self.obstacle_geoms:
-                    if keep("object", obstacle_name[o]):
-                        gm.addCollisionPair(pin.CollisionPair(self.object_geom,
-                                                              self._eroded(gm, o, options.support_tolerance)))
-        self.geometry_model = gm
-        self.geometry_data = gm.createData()
-        cold_start(self.geometry_data)
-        if margin is not None:
-            for k, cp in enumerate(gm.collisionPairs):
-                m = margin(self.geometry_name(cp.first), self.geometry_name(cp.second))
-                self.geometry_data.collisionRequests[k].security_margin = m
-        self.data = robot.model.createData()
-        self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
-            robot.model, self.geometry_model, self.geometry_data)
-        self.n_checks = 0
-
-    def set_object_pose(self, X_PO: np.ndarray) -> None:
-        """Move the object within its parent (W, or the holding hand's grasp frame): the
-        pairs and tolerances stay, so one world serves every placement of an attachment."""
-        X_JO = self._X_JP @ X_PO
-        self.geometry_model.geometryObjects[self.object_geom].placement = pin.SE3(X_JO[:3, :3].copy(),
-                                                                                X_JO[:3, 3].copy())
+    @property
+    def robot_geoms(self) -> np.ndarray:
+        return np.arange(self.n_robot)
 
     @property
     def n_pairs(self) -> int:
         return len(self.geometry_model.collisionPairs)
 
-    def _eroded(self, gm: pin.GeometryModel, gid: int, tol: float) -> int:
-        """Index of a copy of geometry ``gid`` shrunk by ``tol`` (added to ``gm``), or ``gid``
-        itself when its shape cannot be eroded (then no tolerance applies)."""
-        go = gm.geometryObjects[gid]
-        geom = eroded_geometry(go.geometry, tol) if tol > 0 else None
-        if geom is None:
-            return gid
-        copy = gm.addGeometryObject(pin.GeometryObject(f"{go.name}:eroded", go.parentJoint, go.parentFrame,
-                                                       go.placement, geom))
-        self._alias[copy] = gid
-        return copy
-
     def geometry_name(self, gid: int) -> str:
-        gid = self._alias.get(gid, gid)
+        """A link name, ``obstacle:NAME`` or ``object`` (eroded copies by their original)."""
+        gid = self.alias.get(gid, gid)
         go = self.geometry_model.geometryObjects[gid]
-        if gid < len(self.robot_geoms):
+        if gid < self.n_robot:
             return self.robot.model.frames[go.parentFrame].name
         return go.name
+
+
+def _eroded(gm: pin.GeometryModel, alias: dict, gid: int, tol: float) -> int:
+    """Index of a copy of geometry ``gid`` shrunk by ``tol`` (added to ``gm``, recorded in
+    ``alias``), or ``gid`` itself when its shape cannot be eroded (no tolerance applies)."""
+    go = gm.geometryObjects[gid]
+    geom = eroded_geometry(go.geometry, tol) if tol > 0 else None
+    if geom is None:
+        return gid
+    copy = gm.addGeometryObject(pin.GeometryObject(f"{go.name}:eroded", go.parentJoint, go.parentFrame,
+                                                   go.placement, geom))
+    alias[copy] = gid
+    return copy
+
+
+def _robot_geometries(robot: Robot, links: Callable[[str], bool] | None) -> pin.GeometryModel:
+    if links is None:
+        return robot.collision_model.copy()
+    gm = pin.GeometryModel()  # only the robot geometries of the given links: a smaller broadphase
+    for g, go in enumerate(robot.collision_model.geometryObjects):
+        if links(robot.link_of_geometry(g)):
+            gm.addGeometryObject(go.copy())
+    return gm
+
+
+def _add_object(robot: Robot, gm: pin.GeometryModel, obj: ObjectPlacement) -> tuple[int, np.ndarray]:
+    """Add the object on its parent's joint; returns its geometry index and X_JP."""
+    if obj.attached_to is None:
+        joint, frame, X_JO = 0, 0, obj.X_PO
+    else:
+        fid = robot.hands[obj.attached_to].grasp_frame
+        f = robot.model.frames[fid]
+        joint, frame = f.parentJoint, fid
+        X_JO = f.placement.homogeneous @ obj.X_PO
+    go = pin.GeometryObject("object", joint, frame, pin.SE3(X_JO[:3, :3].copy(), X_JO[:3, 3].copy()),
+                            mesh_geometry(obj.mesh))
+    return gm.addGeometryObject(go), X_JO @ inverse(obj.X_PO)
+
+
+def collision_model(robot: Robot, obstacles: Sequence[ObstacleSpec] = (),
+                    disabled_links: Iterable[tuple[str, str]] = (), obj: ObjectPlacement | None = None,
+                    options: CollisionOptions = CollisionOptions(),
+                    pair_filter: Callable[[str, str], bool] | None = None,
+                    margin: Callable[[str, str], float] | None = None,
+                    links: Callable[[str], bool] | None = None) -> CollisionModel:
+    """The pairs of the module docstring.  ``pair_filter(a, b)``, when given, keeps only
+    the pairs it accepts; ``a`` and ``b`` are link names, ``"obstacle:NAME"`` or
+    ``"object"`` (used by the roadmap to check only what an elementary roadmap did not
+    already check).  ``margin(a, b)`` (m, >= 0) is a clearance the pair must keep (coal
+    security margin), used by certified segment checks.  ``links(name)``, when given,
+    leaves out the robot links it rejects altogether."""
+    obstacles = tuple(obstacles)
+    gm = _robot_geometries(robot, links)
+    n_robot = gm.ngeoms
+    obstacle_geoms = []
+    for ob in obstacles:
+        X = ob.X_WO
+        go = pin.GeometryObject(f"obstacle:{ob.name}", 0, 0, pin.SE3(X[:3, :3].copy(), X[:3, 3].copy()),
+                                obstacle_geometry(ob))
+        obstacle_geoms.append(gm.addGeometryObject(go))
+    object_geom, X_JP, alias = None, None, {}
+    if obj is not None:
+        object_geom, X_JP = _add_object(robot, gm, obj)
+
+    disabled = {frozenset(p) for p in disabled_links}
+    link = [robot.model.frames[gm.geometryObjects[g].parentFrame].name for g in range(n_robot)]
+    keep = pair_filter or (lambda a, b: True)
+    obstacle_name = {o: gm.geometryObjects[o].name for o in obstacle_geoms}
+
+    def add(a: int, b: int, name_a: str, name_b: str) -> None:
+        if keep(name_a, name_b):
+            gm.addCollisionPair(pin.CollisionPair(a, b))
+
+    for a in range(n_robot):
+        for b in range(a + 1, n_robot):
+            if frozenset((link[a], link[b])) not in disabled and link[a] != link[b]:
+                add(a, b, link[a], link[b])
+    for a in range(n_robot):
+        if gm.geometryObjects[a].parentJoint == 0:
+            continue  # fixed to the root: never moves
+        for o in obstacle_geoms:
+            add(a, o, link[a], obstacle_name[o])
+    if obj is not None:
+        touching = set(obj.touching) | ({obj.attached_to} if obj.attached_to else set())
+        tips = {robot.model.frames[f].name for h in touching for f in robot.hands[h].tip_frames}
+        for a in range(n_robot):
+            if keep(link[a], "object"):
+                g = _eroded(gm, alias, a, options.contact_tolerance) if link[a] in tips else a
+                gm.addCollisionPair(pin.CollisionPair(g, object_geom))
+        if obj.attached_to is not None:
+            for o in obstacle_geoms:
+                if keep("object", obstacle_name[o]):
+                    gm.addCollisionPair(pin.CollisionPair(object_geom,
+                                                          _eroded(gm, alias, o, options.support_tolerance)))
+    model = CollisionModel(robot, obstacles, obj, options, gm, np.zeros(len(gm.collisionPairs)), n_robot,
+                           tuple(obstacle_geoms), object_geom, alias, X_JP)
+    if margin is not None:
+        for k, cp in enumerate(gm.collisionPairs):
+            model.margins[k] = margin(model.geometry_name(cp.first), model.geometry_name(cp.second))
+    model.margins.flags.writeable = False
+    return model
+
+
+class CollisionWorld:
+    """Checks full-robot configurations against the robot itself, obstacles and the object
+    of a shared :class:`CollisionModel`: the per-query data side (pinocchio Data, coal
+    geometry data and broadphase manager, the object's current pose, a check counter).
+    One per worker or query; never shared between threads."""
+
+    def __init__(self, model: CollisionModel):
+        self.model = model
+        # the object's pose lives in the geometry model (pinocchio reads placements there):
+        # a world that moves the object moves it in its own copy, never in the shared model
+        self.geometry_model = model.geometry_model.copy() if model.object_geom is not None else model.geometry_model
+        self.geometry_data = self.geometry_model.createData()
+        cold_start(self.geometry_data)
+        for k in np.flatnonzero(model.margins):
+            self.geometry_data.collisionRequests[int(k)].security_margin = float(model.margins[k])
+        self.data = model.robot.model.createData()
+        self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
+            model.robot.model, self.geometry_model, self.geometry_data)
+        self.X_PO = None if model.object is None else model.object.X_PO
+        self.n_checks = 0
+
+    # the model's description, for callers that hold only a world
+    robot = property(lambda self: self.model.robot)
+    obstacles = property(lambda self: self.model.obstacles)
+    object = property(lambda self: self.model.object)
+    options = property(lambda self: self.model.options)
+    robot_geoms = property(lambda self: self.model.robot_geoms)
+    obstacle_geoms = property(lambda self: self.model.obstacle_geoms)
+    object_geom = property(lambda self: self.model.object_geom)
+    n_pairs = property(lambda self: self.model.n_pairs)
+
+    def geometry_name(self, gid: int) -> str:
+        return self.model.geometry_name(gid)
+
+    def set_object_pose(self, X_PO: np.ndarray) -> None:
+        """Move the object within its parent (W, or the holding hand's grasp frame): the
+        pairs and tolerances stay, so one world serves every placement of an attachment.
+        ``X_PO`` (4, 4) is kept, not copied: poses are never changed in place."""
+        X_JO = self.model.X_JP @ X_PO
+        self.geometry_model.geometryObjects[self.model.object_geom].placement = pin.SE3(X_JO[:3, :3].copy(),
+                                                                                      X_JO[:3, 3].copy())
+        self.X_PO = X_PO
 
     # ------------------------------------------------------------------ checks
 
@@ -264,6 +326,13 @@ class CollisionWorld:
             if not self.is_free(q0 + t * (q1 - q0)):
                 return False
         return True
+
+
+def collision_world(robot: Robot, obstacles: Sequence[ObstacleSpec] = (),
+                    disabled_links: Iterable[tuple[str, str]] = (), obj: ObjectPlacement | None = None,
+                    options: CollisionOptions = CollisionOptions(), **kwargs) -> CollisionWorld:
+    """A fresh model and one world on it (arguments of :func:`collision_model`)."""
+    return CollisionWorld(collision_model(robot, obstacles, disabled_links, obj, options, **kwargs))
 
 
 def segment_samples(q0: np.ndarray, q1: np.ndarray, resolution: float, min_steps: int = 1) -> np.ndarray:

@@ -11,7 +11,7 @@ hashes exactly those.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -20,7 +20,7 @@ import numpy as np
 
 from regrasp_cli.config import ObstacleSpec
 from regrasp_cli.errors import InputError
-from regrasp_cli.model.collision import CollisionWorld
+from regrasp_cli.model.collision import CollisionWorld, collision_world
 from regrasp_cli.parallel import ordered_map
 from regrasp_cli.roadmap.compose import (LEFT, RIGHT, SuperGraph, UnionFind, candidate_edges, compose_nodes,
                                          edge_kind, involving, link_parts, margin_rule, mixed, part_filter,
@@ -96,9 +96,19 @@ def artefact_path(cache_dir: Path, problem: Problem, options: RoadmapOptions) ->
 
 # ------------------------------------------------------------------ worlds
 
-# Filled in the parent before workers are forked, so that they inherit the collision
-# worlds (which cannot be pickled); cleared when the build ends.
-_SHARED: dict = {}
+@dataclass(frozen=True, eq=False)
+class _Build:
+    """What the build's workers share, made in the parent before they are forked (the
+    collision worlds cannot be pickled); the worlds are the scratch of whoever runs."""
+
+    problem: Problem
+    worlds: dict[str, CollisionWorld]
+    options: RoadmapOptions
+    weights: np.ndarray  # (nq,) path-length weights
+    planner: LocalPlanner
+    chains: tuple  # per edge kind, see edge_chains
+    nodes: np.ndarray | None = None  # (n, nq) Super Graph nodes, once composed
+    source: np.ndarray | None = None  # (n, 2) their elementary nodes
 
 
 def _worlds(problem: Problem, options: RoadmapOptions) -> dict[str, CollisionWorld]:
@@ -107,8 +117,8 @@ def _worlds(problem: Problem, options: RoadmapOptions) -> dict[str, CollisionWor
 
     def world(rule, without: str | None = None):
         keep = None if without is None else (lambda name: parts.get(name) != without)
-        return CollisionWorld(problem.robot, problem.spec.obstacles, problem.disabled.links(),
-                              pair_filter=part_filter(parts, rule), margin=margin, links=keep)
+        return collision_world(problem.robot, problem.spec.obstacles, problem.disabled.links(),
+                               pair_filter=part_filter(parts, rule), margin=margin, links=keep)
 
     # the elementary worlds leave the other arm out altogether (it is in no checked pair)
     return {"right": world(subsystem(RIGHT), LEFT), "left": world(subsystem(LEFT), RIGHT),
@@ -133,12 +143,12 @@ def edge_chains(robot) -> tuple[tuple[np.ndarray, ...] | None, ...]:
     return ((np.r_[t, l], np.r_[l, r]), (np.r_[t, r], np.r_[l, r]), None)
 
 
-def _elementary(side: str) -> tuple[Roadmap, int]:
-    problem, worlds, options = _SHARED["problem"], _SHARED["worlds"], _SHARED["options"]
+def _elementary(b: _Build, side: str) -> tuple[Roadmap, int]:
+    problem, options, planner = b.problem, b.options, b.planner
     robot = problem.robot
     idx = np.concatenate([robot.groups["torso"], robot.groups[f"{side}_arm"]])
-    base, w = q_base(problem), _SHARED["weights"][idx]
-    world = worlds[side]
+    base, w = q_base(problem), b.weights[idx]
+    world = b.worlds[side]
     rng = np.random.default_rng([options.seed, 0 if side == "right" else 1])
     lo, hi = robot.lower[idx], robot.upper[idx]
 
@@ -150,22 +160,55 @@ def _elementary(side: str) -> tuple[Roadmap, int]:
     roadmap = visibility_prm(
         sample=lambda: rng.uniform(lo, hi),
         is_free=lambda x: world.is_free(full(x)),
-        segment_free=lambda x0, x1: _SHARED["planner"].segment_free(world, full(x0), full(x1)),
-        maybe_free=lambda x0, x1: _SHARED["planner"].segment_free(world, full(x0), full(x1), limit=PROBE),
+        segment_free=lambda x0, x1: planner.segment_free(world, full(x0), full(x1)),
+        maybe_free=lambda x0, x1: planner.segment_free(world, full(x0), full(x1), limit=PROBE),
         distance=lambda x0, xs: distance(x0, xs, w),
         options=VisPRMOptions(max_nodes=options.nodes, max_failures=options.max_failures))
     return roadmap, world.n_checks
 
 
-def _check_edges(chunk: np.ndarray) -> tuple[np.ndarray, int]:
+def _edge_worlds(b: _Build) -> tuple[CollisionWorld, ...]:
+    """The worlds of the three edge kinds (edge_kind's order)."""
+    return b.worlds["node_right_torso"], b.worlds["node_left_torso"], b.worlds["mixed"]
+
+
+def _check_edges(b: _Build, chunk: np.ndarray) -> tuple[np.ndarray, int]:
     """Validity (c,) of candidate Super Graph edges (c, 2), and the checks made."""
-    worlds, nodes, source = _SHARED["worlds"], _SHARED["nodes"], _SHARED["source"]
-    planner, chains = _SHARED["planner"], _SHARED["chains"]
-    by_kind = (worlds["node_right_torso"], worlds["node_left_torso"], worlds["mixed"])
+    by_kind = _edge_worlds(b)
     before = sum(w.n_checks for w in by_kind)
-    ok = np.array([planner.segment_free(by_kind[k], nodes[a], nodes[b], chains[k])
-                   for a, b in chunk for k in (edge_kind(source, a, b),)], dtype=bool)
+    ok = np.array([b.planner.segment_free(by_kind[k], b.nodes[i], b.nodes[j], b.chains[k])
+                   for i, j in chunk for k in (edge_kind(b.source, i, j),)], dtype=bool)
     return ok, sum(w.n_checks for w in by_kind) - before
+
+
+def _tree_edges(b: _Build, cand: np.ndarray, progress) -> tuple[np.ndarray, int]:
+    """Validity (c,) of the candidates that join two components (a spanning forest: the
+    ``tree`` option), tested in order, and the checks made."""
+    uf, by_kind = UnionFind(len(b.nodes)), _edge_worlds(b)
+    valid = np.zeros(len(cand), dtype=bool)
+    before = sum(w.n_checks for w in by_kind)
+    for k, (i, j) in enumerate(cand):
+        kind = edge_kind(b.source, i, j)
+        if uf.find(int(i)) != uf.find(int(j)) and \
+                b.planner.segment_free(by_kind[kind], b.nodes[i], b.nodes[j], b.chains[kind]):
+            uf.union(int(i), int(j))
+            valid[k] = True
+        if progress and k % 256 == 0:
+            progress("Super Graph edges", k, len(cand))
+    return valid, sum(w.n_checks for w in by_kind) - before
+
+
+def _all_edges(b: _Build, cand: np.ndarray, jobs: int, progress) -> tuple[np.ndarray, int]:
+    """Validity (c,) of every candidate, in chunks over ``jobs`` workers, and the checks made."""
+    valid, checks, done = np.zeros(len(cand), dtype=bool), 0, 0
+    chunks = [cand[i:i + EDGE_CHUNK] for i in range(0, len(cand), EDGE_CHUNK)]
+    for k, (ok, n) in enumerate(ordered_map(_check_edges, chunks, jobs, b)):
+        valid[k * EDGE_CHUNK:k * EDGE_CHUNK + len(ok)] = ok
+        checks += n
+        done += len(ok)
+        if progress:
+            progress("Super Graph edges", done, len(cand))
+    return valid, checks
 
 
 # ------------------------------------------------------------------ build
@@ -188,60 +231,34 @@ def build_roadmap(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: i
     worlds = _worlds(problem, options)
     weights = joint_weights(robot)
     planner = LocalPlanner(options.resolution, options.margin, joint_reach(robot))
-    _SHARED.update(problem=problem, worlds=worlds, options=options, weights=weights, planner=planner,
-                   chains=edge_chains(robot))
-    checks = 0
-    try:
-        if progress:
-            progress("elementary roadmaps", 0, 2)
-        (right, cr), (left, cl) = list(ordered_map(_elementary, ["right", "left"], min(jobs, 2)))
-        checks += cr + cl
-        seconds["elementary roadmaps"] = time.perf_counter() - t0
-        if progress:
-            progress("elementary roadmaps", 2, 2)
+    b = _Build(problem, worlds, options, weights, planner, edge_chains(robot))
+    if progress:
+        progress("elementary roadmaps", 0, 2)
+    (right, cr), (left, cl) = list(ordered_map(_elementary, ["right", "left"], min(jobs, 2), b))
+    checks = cr + cl
+    seconds["elementary roadmaps"] = time.perf_counter() - t0
+    if progress:
+        progress("elementary roadmaps", 2, 2)
 
-        t1 = time.perf_counter()
-        base = q_base(problem)
-        before = worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks
-        nodes, source, tested_nodes = compose_nodes(robot, base, right.nodes, left.nodes,
-                                                    worlds["node_right_torso"].is_free,
-                                                    worlds["node_left_torso"].is_free)
-        checks += worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks - before
-        seconds["Super Graph nodes"] = time.perf_counter() - t1
+    t1 = time.perf_counter()
+    before = worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks
+    nodes, source, tested_nodes = compose_nodes(robot, q_base(problem), right.nodes, left.nodes,
+                                                worlds["node_right_torso"].is_free,
+                                                worlds["node_left_torso"].is_free)
+    checks += worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks - before
+    seconds["Super Graph nodes"] = time.perf_counter() - t1
 
-        t2 = time.perf_counter()
-        cand = candidate_edges(source, right.neighbours(), left.neighbours())
-        _SHARED.update(nodes=nodes, source=source)
-        valid = np.zeros(len(cand), dtype=bool)
-        if options.tree:
-            uf, by_kind = UnionFind(len(nodes)), (worlds["node_right_torso"], worlds["node_left_torso"], worlds["mixed"])
-            before = sum(w.n_checks for w in by_kind)
-            for k, (a, b) in enumerate(cand):
-                kind = edge_kind(source, a, b)
-                if uf.find(int(a)) != uf.find(int(b)) and \
-                        planner.segment_free(by_kind[kind], nodes[a], nodes[b], _SHARED["chains"][kind]):
-                    uf.union(int(a), int(b))
-                    valid[k] = True
-                if progress and k % 256 == 0:
-                    progress("Super Graph edges", k, len(cand))
-            checks += sum(w.n_checks for w in by_kind) - before
-        else:
-            chunks = [cand[i:i + EDGE_CHUNK] for i in range(0, len(cand), EDGE_CHUNK)]
-            done = 0
-            for k, (ok, n) in enumerate(ordered_map(_check_edges, chunks, jobs)):
-                valid[k * EDGE_CHUNK:k * EDGE_CHUNK + len(ok)] = ok
-                checks += n
-                done += len(ok)
-                if progress:
-                    progress("Super Graph edges", done, len(cand))
-        if progress:
-            progress("Super Graph edges", len(cand), len(cand))
-        edges = cand[valid]
-        lengths = distance(nodes[edges[:, 0]], nodes[edges[:, 1]], weights) if len(edges) else np.zeros(0)
-        graph = SuperGraph(nodes, source, edges, np.asarray(lengths, dtype=float), tested_nodes, len(cand))
-        seconds["Super Graph edges"] = time.perf_counter() - t2
-    finally:
-        _SHARED.clear()
+    t2 = time.perf_counter()
+    cand = candidate_edges(source, right.neighbours(), left.neighbours())
+    b = replace(b, nodes=nodes, source=source)
+    valid, n = _tree_edges(b, cand, progress) if options.tree else _all_edges(b, cand, jobs, progress)
+    checks += n
+    if progress:
+        progress("Super Graph edges", len(cand), len(cand))
+    edges = cand[valid]
+    lengths = distance(nodes[edges[:, 0]], nodes[edges[:, 1]], weights) if len(edges) else np.zeros(0)
+    graph = SuperGraph(nodes, source, edges, np.asarray(lengths, dtype=float), tested_nodes, len(cand))
+    seconds["Super Graph edges"] = time.perf_counter() - t2
 
     art = RoadmapArtefact(right, left, graph, robot.joint_names, weights)
     t3 = time.perf_counter()

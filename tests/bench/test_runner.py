@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from regrasp_cli.bench.runner import RunItem, path_length, regrasps, run_one
+from regrasp_cli.bench.runner import RunItem, _stamp, path_length, regrasps, run_one
 
 
 def item(tmp: Path, budget_s: float = 5.0) -> RunItem:
@@ -87,3 +87,22 @@ def test_path_length_and_regrasps_on_a_hand_over():
              SimpleNamespace(holding={"right": "right-3"}, waypoints=np.zeros((0, 2))),
              SimpleNamespace(holding={"right": "right-5"}, waypoints=np.zeros((0, 2)))]
     assert regrasps(again) == 1 and regrasps(again[:2]) == 0
+
+
+def test_a_worker_context_is_keyed_by_its_inputs_so_a_rebuilt_artefact_is_reloaded(tmp_path):
+    scene, cache = tmp_path / "scene.yaml", tmp_path / "cache"
+    scene.write_text("a: 1\n")
+    (cache / "grasps").mkdir(parents=True)
+    (cache / "other").mkdir()
+    lists = cache / "grasps" / "obj-right-abc.h5"
+    lists.write_bytes(b"one")
+    first = _stamp(str(scene), str(cache))
+    assert [Path(p).name for p, _, _ in first] == ["scene.yaml", "obj-right-abc.h5"]
+    (cache / "other" / "x.h5").write_bytes(b"not an input")
+    assert _stamp(str(scene), str(cache)) == first
+    lists.write_bytes(b"rebuilt")  # another size (and time)
+    assert _stamp(str(scene), str(cache)) != first
+    second = _stamp(str(scene), str(cache))
+    (cache / "roadmap").mkdir()
+    (cache / "roadmap" / "r.h5").write_bytes(b"r")
+    assert _stamp(str(scene), str(cache)) != second

@@ -28,7 +28,7 @@ from regrasp_cli.grasp.build import (
 from regrasp_cli.grasp.quality import combine_scores, force_closure, primitive_wrenches
 from regrasp_cli.grasp.single import GraspOptions
 from regrasp_cli.grasp.surface import build_surface, sampling_step
-from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement
+from regrasp_cli.model.collision import ObjectPlacement, collision_world
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.scene import load_problem
 from regrasp_cli.spatial import inverse, rotation_angle
@@ -187,8 +187,8 @@ def test_no_hand_object_collision_but_at_the_fingertips(problem, glist):
     assert tip_links < hand_links and len(hand_links - tip_links) >= 8  # palm + 2 phalanges per finger
 
     def hand_hits(X_GO, q):
-        world = CollisionWorld(robot, (), problem.disabled.links(),
-                               ObjectPlacement(problem.object.mesh, X_GO, attached_to=HAND), problem.collision_options)
+        world = collision_world(robot, (), problem.disabled.links(),
+                                ObjectPlacement(problem.object.mesh, X_GO, attached_to=HAND), problem.collision_options)
         return {b if a == "object" else a for a, b in world.colliding_pairs(q) if "object" in (a, b)} & hand_links
 
     # control: the object's box centre at the grasp frame puts the palm inside it
@@ -197,9 +197,9 @@ def test_no_hand_object_collision_but_at_the_fingertips(problem, glist):
     assert "r_palm" in hand_hits(X_GO, _q(problem, h.open))
     bad = []
     for g in range(len(glist)):
-        world = CollisionWorld(robot, (), problem.disabled.links(),
-                               ObjectPlacement(problem.object.mesh, inverse(glist.X_OG[g]), attached_to=HAND),
-                               problem.collision_options)
+        world = collision_world(robot, (), problem.disabled.links(),
+                                ObjectPlacement(problem.object.mesh, inverse(glist.X_OG[g]), attached_to=HAND),
+                                problem.collision_options)
         for a, b in world.colliding_pairs(_q(problem, glist.finger_q[g])):
             if "object" in (a, b):
                 other = b if a == "object" else a

@@ -31,12 +31,12 @@ def test_baxter_groups_and_hands(baxter):
 
 
 def test_baxter_rest_is_collision_free_with_srdf_matrix(baxter, tmp_path):
-    from regrasp_cli.model.collision import CollisionWorld
+    from regrasp_cli.model.collision import collision_world
     from regrasp_cli.model.selfcollision import disabled_pairs
 
     pairs = disabled_pairs(baxter, tmp_path)
     assert pairs.count("user") > 0  # the SRDF's pairs were read
-    world = CollisionWorld(baxter, (), pairs.links())
+    world = collision_world(baxter, (), pairs.links())
     assert world.colliding_pairs(baxter.q_rest) == []
     # the right gripper sent where the left one is: the two hands collide
     from regrasp_cli.model.ik import arm_ik

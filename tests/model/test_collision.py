@@ -22,6 +22,7 @@ from regrasp_cli.model.collision import (
     CollisionOptions,
     CollisionWorld,
     ObjectPlacement,
+    collision_world,
     eroded_geometry,
     mesh_geometry,
     segment_samples,
@@ -157,17 +158,17 @@ def test_sphere_obstacle_at_a_fingertip_collides(problem):
     tip = robot.hands["right"].tip_frames[1]
     p = Kinematics(robot).fk(robot.q_rest, tip)[:3, 3]
     links = problem.disabled.links()
-    w = CollisionWorld(robot, [_ball("ball", 0.01, p)], links)
+    w = collision_world(robot, [_ball("ball", 0.01, p)], links)
     assert not w.is_free(robot.q_rest)
     assert (_tip_link(problem), "obstacle:ball") in w.colliding_pairs(robot.q_rest)
-    far = CollisionWorld(robot, [_ball("ball", 0.01, p + [0.0, 0.0, 0.3])], links)
+    far = collision_world(robot, [_ball("ball", 0.01, p + [0.0, 0.0, 0.3])], links)
     assert far.is_free(robot.q_rest)
 
 
 def test_obstacles_fixed_to_the_root_are_not_checked(problem):
     """An obstacle touching only the (immobile) base of the robot is the user's design."""
     robot = problem.robot
-    w = CollisionWorld(robot, [_ball("stool", 0.05, [0.0, 0.0, 0.3])], problem.disabled.links())
+    w = collision_world(robot, [_ball("stool", 0.05, [0.0, 0.0, 0.3])], problem.disabled.links())
     assert w.is_free(robot.q_rest)
 
 
@@ -206,8 +207,8 @@ def _touching_world(problem, penetration: float, touching, tolerance: float = 0.
     X = _pose(R, X_tip[:3, 3] + u * (finger.tip_radius - penetration + 0.005))
     cube = trimesh.creation.box(extents=[0.01, 0.01, 0.01])
     obj = ObjectPlacement(cube, X, touching=touching)
-    return CollisionWorld(robot, problem.spec.obstacles, problem.disabled.links(), obj,
-                          CollisionOptions(contact_tolerance=tolerance, support_tolerance=tolerance))
+    return collision_world(robot, problem.spec.obstacles, problem.disabled.links(), obj,
+                           CollisionOptions(contact_tolerance=tolerance, support_tolerance=tolerance))
 
 
 def test_fingertip_contact_within_tolerance(problem):
@@ -237,8 +238,8 @@ def _held_cube_world(problem, support_gap: float, obstacles=()):
     X_GO = _pose(X_WG[:3, :3].T, [0.0, 0.0, 0.0])
     support = ObstacleSpec("support", "box", (0.04, 0.04, 0.02), _pose(np.eye(3), X_WG[:3, 3] - [0, 0, 0.02 + support_gap]))
     obj = ObjectPlacement(trimesh.creation.box(extents=[0.02, 0.02, 0.02]), X_GO, attached_to="right")
-    return CollisionWorld(robot, [support, *obstacles], problem.disabled.links(), obj,
-                          CollisionOptions(contact_tolerance=0.002, support_tolerance=0.002)), X_GO
+    return collision_world(robot, [support, *obstacles], problem.disabled.links(), obj,
+                           CollisionOptions(contact_tolerance=0.002, support_tolerance=0.002)), X_GO
 
 
 def test_held_object_may_rest_on_a_support(problem):
@@ -287,7 +288,7 @@ def test_segment_through_a_collision(problem):
     q1[j] += 0.6
     qm[j] += 0.3
     palm_centre = _geometry_centre(robot, "r_palm", qm)
-    w = CollisionWorld(robot, [*problem.spec.obstacles, _ball("ball", 0.03, palm_centre)], problem.disabled.links())
+    w = collision_world(robot, [*problem.spec.obstacles, _ball("ball", 0.03, palm_centre)], problem.disabled.links())
     assert w.is_free(q0) and w.is_free(q1) and not w.is_free(qm)
     assert not w.segment_free(q0, q1, problem.spec.planning.segment_resolution)
     assert not w.segment_free(q1, q0, problem.spec.planning.segment_resolution)
@@ -413,3 +414,25 @@ def test_unreadable_cache_is_recomputed(problem, cache_dir, tmp_path, monkeypatc
     assert calls == [problem.robot.spec.self_collision.samples]
     assert json.loads(bad.read_text())["pairs"] == [["chest", "r_arm_link1", "adjacent"]]
     assert disabled_pairs(problem.robot, tmp_path) == fake and len(calls) == 1
+
+
+def test_worlds_on_one_model_move_their_object_apart(problem):
+    """Model/Data split: a model shared by two worlds is never changed by them; each world
+    moves the object in its own data, so one world's placement does not leak into the
+    other's answers."""
+    robot = problem.robot
+    world, X_GO = _held_cube_world(problem, 0.01)
+    model = world.model
+    before = model.geometry_model.geometryObjects[model.object_geom].placement.homogeneous.copy()
+    other = CollisionWorld(model)
+    q = robot.q_rest
+    assert world.is_free(q) and other.is_free(q)
+    X_down = X_GO.copy()
+    X_down[:3, 3] += X_GO[:3, :3] @ [0.0, 0.0, -0.015]  # 1.5 cm lower in W: 5 mm into the support
+    other.set_object_pose(X_down)
+    assert not other.is_free(q)
+    assert other.colliding_pairs(q) == [("object", "obstacle:support")]
+    assert world.is_free(q)  # still at X_GO
+    assert other.X_PO is X_down and world.X_PO is X_GO
+    after = model.geometry_model.geometryObjects[model.object_geom].placement.homogeneous
+    np.testing.assert_array_equal(before, after)

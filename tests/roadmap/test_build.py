@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from regrasp_cli.errors import InputError, StaleArtefactError
-from regrasp_cli.model.collision import CollisionWorld
+from regrasp_cli.model.collision import CollisionWorld, collision_world
 from regrasp_cli.model.robot import load_robot
 from regrasp_cli.roadmap import compose
 from regrasp_cli.roadmap.build import (RoadmapArtefact, RoadmapOptions, artefact_path, build_roadmap, load_or_build,
@@ -66,7 +66,7 @@ def plain_world(problem) -> CollisionWorld:
 def subsystem_world(problem, side: str) -> CollisionWorld:
     robot = problem.robot
     filt = compose.part_filter(compose.link_parts(robot), compose.subsystem(side))
-    return CollisionWorld(robot, problem.spec.obstacles, problem.disabled.links(), pair_filter=filt)
+    return collision_world(robot, problem.spec.obstacles, problem.disabled.links(), pair_filter=filt)
 
 
 def arrays(art: RoadmapArtefact) -> dict[str, np.ndarray]:

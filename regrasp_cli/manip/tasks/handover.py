@@ -40,7 +40,7 @@ from regrasp_cli.manip.queries import PhaseWorlds, Roadmap
 from regrasp_cli.manip.solve import Outcome, Query, Step, TransitionStats, check_ends, solve_queries, time_steps
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.motion.local import joint_reach, joint_weights
-from regrasp_cli.parallel import ordered_map, shared
+from regrasp_cli.parallel import ordered_map
 from regrasp_cli.scene import Problem
 from regrasp_cli.spatial import inverse
 
@@ -156,9 +156,8 @@ def phase_worlds(scratch: Scratch, X_PO: np.ndarray, attached: str | None, finge
 # ------------------------------------------------------------------ double grasps
 
 
-def _single_job(hand: str):
+def _single_job(j: dict, hand: str):
     """Single-grasp configurations of one hand (in a forked worker, or in this process)."""
-    j = shared()
     scratch = j["scratch"]
     rng = np.random.default_rng([j["seed"], 10 + ("right", "left").index(hand)])
     before = scratch.checks
