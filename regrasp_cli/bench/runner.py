@@ -163,6 +163,11 @@ def _context(scene_file: str, cache_dir: str, with_roadmap: bool, roadmap_nodes:
     return problem, lists, Roadmap.of(art) if art is not None else None, hashes, joint_weights(problem.robot)
 
 
+def _item_context(item: RunItem):
+    return _context(item.scene_file, item.cache_dir, item.planner == REFERENCE, item.roadmap_nodes,
+                    item.grasp_target, _stamp(item.scene_file, item.cache_dir))
+
+
 def path_length(phases, weights: np.ndarray) -> float:
     """Sum of the weighted joint-space lengths of the straight segments between
     consecutive waypoints of every phase (``phases``: objects with ``waypoints`` (k, nq))."""
@@ -204,9 +209,7 @@ def execute(item: RunItem) -> dict:
     from regrasp_cli.trajectory import write_plan
     from regrasp_cli.validate import validate_plan
 
-    problem, lists, roadmap, hashes, weights = _context(item.scene_file, item.cache_dir, item.planner == REFERENCE,
-                                                        item.roadmap_nodes, item.grasp_target,
-                                                        _stamp(item.scene_file, item.cache_dir))
+    problem, lists, roadmap, hashes, weights = _item_context(item)
     rec = _base(item)
     # the same RRT-Connect budget for every planner; OMPL's wall-clock guard is the run's budget
     default = OnlineOptions()
@@ -312,8 +315,7 @@ def run_one(item: RunItem, work: Callable[[RunItem], dict] = execute) -> dict:
     t0 = time.perf_counter()
     try:
         if work is execute:
-            _context(item.scene_file, item.cache_dir, item.planner == REFERENCE, item.roadmap_nodes,
-                     item.grasp_target)
+            _item_context(item)
     except BaseException as exc:  # noqa: BLE001
         return _crash(item, exc, time.perf_counter() - t0)
     recv, send = os.pipe()
