@@ -11,11 +11,13 @@ from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.build import BuildOptions, GraspList
 from regrasp_cli.roadmap.build import RoadmapArtefact, RoadmapOptions
 from regrasp_cli.scene import Problem
-from regrasp_cli.store import sha256_file
+from regrasp_cli.store import artefact_lock, sha256_file, why_not_fresh
 
 
 class Builder(Protocol):
     """Builds a missing or stale artefact (the CLI's shows progress bars and a summary)."""
+
+    def notice(self, message: str) -> None: ...
 
     def grasps(self, scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> None: ...
 
@@ -23,6 +25,9 @@ class Builder(Protocol):
 
 
 class QuietBuilder:
+    def notice(self, message: str) -> None:
+        pass
+
     def grasps(self, scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> None:
         from regrasp_cli.grasp.build import build_grasps
 
@@ -80,7 +85,6 @@ def load_artefacts(scene: Path, cache_dir: Path, problem: Problem, build: bool, 
     ``builder`` builds a missing one (the CLI's shows progress); default: quietly."""
     from regrasp_cli.grasp import build as gb
     from regrasp_cli.roadmap import build as rb
-    from regrasp_cli.store import is_fresh
 
     builder = builder or QuietBuilder()
 
@@ -88,21 +92,28 @@ def load_artefacts(scene: Path, cache_dir: Path, problem: Problem, build: bool, 
     options = build_options(spec.planning.seed, None, jobs, None, None, grasp_target)
     lists, hashes = {}, {}
     for hand in ("right", "left"):
-        prov = gb.provenance(problem, hand, options)
-        path = gb.artefact_path(cache_dir, problem, hand, options)
-        if build and not (path.is_file() and is_fresh(path, prov)):
-            builder.grasps(scene, cache_dir, hand, options)
-        lists[hand] = gb.read_grasp_list(path, prov)
-        hashes[f"grasps_{hand}"] = sha256_file(path)
+        lists[hand], hashes[f"grasps_{hand}"] = _cached(
+            gb.artefact_path(cache_dir, problem, hand, options), gb.provenance(problem, hand, options), build,
+            lambda: builder.grasps(scene, cache_dir, hand, options), gb.read_grasp_list, builder)
     art = None
     if need_roadmap:
         r_opts = roadmap_options(spec, roadmap_nodes, False, None)
-        prov = rb.provenance(problem, r_opts)
-        path = rb.artefact_path(cache_dir, problem, r_opts)
-        if build and not (path.is_file() and is_fresh(path, prov)):
-            builder.roadmap(scene, cache_dir, r_opts, jobs)
-        art = rb.read_roadmap(path, prov)
-        hashes["roadmap"] = sha256_file(path)
+        art, hashes["roadmap"] = _cached(
+            rb.artefact_path(cache_dir, problem, r_opts), rb.provenance(problem, r_opts), build,
+            lambda: builder.roadmap(scene, cache_dir, r_opts, jobs), rb.read_roadmap, builder)
     return lists, art, hashes
+
+
+def _cached(path: Path, prov, build: bool, make, read, builder: Builder):
+    """``read(path, prov)`` and the file's SHA-256, after ``make()`` when the artefact is
+    missing, stale or damaged (and ``build``; else ``read`` refuses it), all under the
+    artefact's lock: a concurrent run waits and reuses what this one built."""
+    with artefact_lock(path):
+        why = why_not_fresh(path, prov) if build else None
+        if why is not None:
+            if why != "missing":
+                builder.notice(f"rebuilding {path}: {why.split('; rebuild it with')[0]}")
+            make()
+        return read(path, prov), sha256_file(path)
 
 

@@ -55,9 +55,34 @@ def _warning_line(message, category, filename, lineno, file=None, line=None) -> 
     click.echo(f"warning: {message}", err=True)
 
 
+def _check_seed(ctx: click.Context, param: click.Parameter, value: int | None) -> int | None:
+    if value is not None and value < 0:
+        from regrasp_cli.errors import InputError
+
+        raise InputError(None, "--seed", f"expected an integer >= 0, found {value}")
+    return value
+
+
+def seed_option(help: str = "Random seed (default: the scene's planning.seed)."):
+    return click.option("--seed", type=int, default=None, callback=_check_seed, help=help)
+
+
+def _set_cache_dir(ctx: click.Context, param: click.Parameter, value: Path | None) -> None:
+    if value is not None:
+        ctx.obj["cache_dir"] = value
+
+
+def cache_option(f):
+    """--cache-dir after the subcommand too (``regrasp plan S --cache-dir D``)."""
+    return click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+                        expose_value=False, callback=_set_cache_dir,
+                        help="Where cached artefacts are kept (as before the command; default: cache).")(f)
+
+
 @main.command()
 @click.argument("scene", type=click.Path(path_type=Path))
-@click.option("--seed", type=int, default=None, help="Random seed (default: the scene's planning.seed).")
+@seed_option()
+@cache_option
 @click.pass_context
 def info(ctx: click.Context, scene: Path, seed: int | None) -> None:
     """Summarise a scene: robot, collision pairs, obstacles, object, reachability."""
@@ -74,7 +99,7 @@ def grasps() -> None:
 @grasps.command("build")
 @click.argument("scene", type=click.Path(path_type=Path))
 @click.option("--hand", type=click.Choice(["right", "left", "both"]), default="both", show_default=True)
-@click.option("--seed", type=int, default=None, help="Seed of the surface sampling (default: planning.seed).")
+@seed_option("Seed of the surface sampling (default: planning.seed).")
 @click.option("--jobs", type=int, default=2, show_default=True, help="Parallel worker processes.")
 @click.option("--positions", type=int, default=None, help="Grasp-frame positions in the bounding box.")
 @click.option("--orientations", type=int, default=None, help="Grasp-frame orientations (SO(3) grid).")
@@ -82,6 +107,7 @@ def grasps() -> None:
               help="Stop once this many distinct grasps are found (0: try every frame; default 120).")
 @click.option("--weights", type=str, default=None, metavar="FC,CENTROID,ELLIPSOID,CURVATURE",
               help="Weights of the quality terms (default 1,1,1,6 as in the paper).")
+@cache_option
 @click.pass_context
 def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, jobs: int,
                  positions: int | None, orientations: int | None, target: int | None, weights: str | None) -> None:
@@ -99,6 +125,7 @@ def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, j
 @click.option("--png", type=click.Path(path_type=Path), default=None, metavar="FILE",
               help="Also draw the best grasps on the object (hand, grasp frame, contacts and normals) into this "
                    "PNG; needs --scene.")
+@cache_option
 @click.pass_context
 def grasps_show(ctx: click.Context, file: Path, best: int, scene: Path | None, png: Path | None) -> None:
     """Print the stored provenance and the best grasps of a grasp list; draw them with --png."""
@@ -123,8 +150,9 @@ def roadmap() -> None:
 @click.option("--nodes", type=int, default=lambda: _roadmap_nodes(), show_default=True,
               help="Nodes of each elementary roadmap.")
 @click.option("--tree", is_flag=True, help="Super Graph edges only between different components (a forest).")
-@click.option("--seed", type=int, default=None, help="Random seed (default: the scene's planning.seed).")
+@seed_option()
 @click.option("--jobs", type=int, default=2, show_default=True, help="Parallel worker processes.")
+@cache_option
 @click.pass_context
 def roadmap_build(ctx: click.Context, scene: Path, nodes: int, tree: bool, seed: int | None, jobs: int) -> None:
     """Build the elementary roadmaps and the Super Graph; store them in the cache (HDF5)."""
@@ -137,6 +165,7 @@ def roadmap_build(ctx: click.Context, scene: Path, nodes: int, tree: bool, seed:
 @click.argument("file", type=click.Path(path_type=Path))
 @click.option("--scene", type=click.Path(path_type=Path), default=None,
               help="Check the file against this scene's robot and obstacles; refuse it if stale.")
+@cache_option
 @click.pass_context
 def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
     """Print the stored provenance and summary of a roadmap."""
@@ -147,9 +176,9 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
 
 @main.command()
 @click.argument("scene", type=click.Path(path_type=Path))
-@click.option("-o", "--output", type=click.Path(dir_okay=False, path_type=Path), default=Path("plan.json"),
+@click.option("-o", "--output", type=click.Path(path_type=Path), default=Path("plan.json"),
               show_default=True, help="Where to write the plan JSON.")
-@click.option("--seed", type=int, default=None, help="Random seed (default: the scene's planning.seed).")
+@seed_option()
 @click.option("--planner", type=click.Choice(["roadmap", "rrt-connect", "ompl-rrtconnect"]), default="roadmap",
               show_default=True,
               help="Queries through the cached Super Graph, single-query RRT-Connect (the paper's baseline) or "
@@ -164,6 +193,7 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
               help="Nodes per elementary roadmap of the roadmap to use (built if missing).")
 @click.option("--grasp-target", type=int, default=None,
               help="Target size of the grasp lists to use (built if missing; default 120).")
+@cache_option
 @click.pass_context
 def plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, planner: str, no_build: bool, jobs: int,
          no_timings: bool, no_check: bool, roadmap_nodes: int, grasp_target: int | None) -> None:
@@ -233,6 +263,7 @@ def show(plan_file: Path, html_file: Path | None, png_dir: Path | None, fps: int
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="The Dask scheduler's address (e.g. tcp://host:8786), for --backend dask; the workers must "
                    "see the cache and results folders at the same paths (a shared file system).")
+@cache_option
 @click.pass_context
 def bench(ctx: click.Context, suite_file: Path, output: Path | None, jobs: int, seeds: int | None,
           planners: str | None, budget_s: float | None, backend: str, scheduler: str | None,

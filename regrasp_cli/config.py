@@ -25,6 +25,10 @@ from regrasp_cli.spatial import pose_matrix
 ROBOT_FORMAT = "regrasp.robot/1"
 SCENE_FORMAT = "regrasp.scene/1"
 HAND_SIDES = ("right", "left")
+# Coulomb coefficients of real contact pairs stay below about 2 (rubber on dry rough
+# surfaces); at 5 the friction cone's half-angle is 79 degrees and almost any grasp is
+# force-closure, so a larger value is a typo, not a material
+MAX_FRICTION = 5.0
 ARM_OF_HAND = {"right": "right_arm", "left": "left_arm"}
 
 
@@ -48,6 +52,24 @@ def read_yaml(path: str | Path) -> tuple[Path, dict]:
     if not isinstance(data, dict):
         raise InputError(path, None, f"expected a YAML mapping at the top level, found {_kind(data)}")
     return path.resolve(), data
+
+
+def _number_text(s: str) -> bool:
+    """A string YAML 1.1 left as text although Python reads it as a number (``1.0e9``)."""
+    try:
+        return math.isfinite(float(s))
+    except ValueError:
+        return False
+
+
+def _number_hint(s: str) -> str:
+    """How to write the text ``s`` so that YAML 1.1 reads a number."""
+    if "e" not in s.lower():
+        return "write it without quotes"
+    mantissa, _, exponent = f"{float(s):e}".partition("e")
+    mantissa = mantissa.rstrip("0")
+    mantissa += "0" if mantissa.endswith(".") else ""
+    return f"YAML 1.1 reads an exponent without a sign or a number without a dot as text; write {mantissa}e{int(exponent):+d}"
 
 
 def _kind(v: Any) -> str:
@@ -103,14 +125,18 @@ class Fields:
             raise self.error(key, f"expected an integer >= {minimum}, found {v}")
         return v
 
-    def float(self, key: str, default: Any = ..., positive: bool = False) -> float:
+    def float(self, key: str, default: Any = ..., positive: bool = False, maximum: float | None = None) -> float:
         if default is not ... and key not in self.data:
             return default
         v = self.raw(key)
+        if isinstance(v, str) and _number_text(v):
+            raise self.error(key, f"expected a number, found the text {v!r} ({_number_hint(v)})")
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise self.error(key, f"expected a finite number, found {v!r}")
         if positive and v <= 0:
             raise self.error(key, f"expected a number > 0, found {v}")
+        if maximum is not None and v > maximum:
+            raise self.error(key, f"expected a number <= {maximum:g}, found {v:g}")
         return float(v)
 
     def vector(self, key: str, n: int | None = None, positive: bool = False) -> tuple[float, ...]:
@@ -405,7 +431,8 @@ def load_scene_spec(path: str | Path) -> SceneSpec:
     mesh = o.str("mesh")
     if not mesh.startswith("builtin:"):
         mesh = str(resolve_path(file, "object.mesh", mesh))
-    obj = ObjectSpec(mesh, o.float("scale", 1.0, positive=True), o.float("friction", 0.5, positive=True))
+    obj = ObjectSpec(mesh, o.float("scale", 1.0, positive=True),
+                     o.float("friction", 0.5, positive=True, maximum=MAX_FRICTION))
 
     raw = f.data.get("obstacles", []) or []
     if not isinstance(raw, list):

@@ -37,3 +37,8 @@ class InputError(RegraspError):
 
 class StaleArtefactError(InputError):
     """A cached artefact whose recorded input hashes do not match the current inputs."""
+
+
+class CorruptArtefactError(StaleArtefactError):
+    """A cached artefact whose contents are damaged: unreadable (truncated, empty) or not
+    matching the checksum written with them.  Rebuilding fixes it, like a stale one."""

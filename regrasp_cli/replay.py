@@ -142,7 +142,9 @@ def _obstacle(file: Path, d: Any, i: int) -> ObstacleSpec:
 
 def load_inputs(plan: Plan, file: Path) -> Inputs:
     """Load what ``plan`` (read from ``file``) refers to; InputError when missing,
-    malformed or stale."""
+    malformed or stale (the scene, robot or object changed since planning)."""
+    scene = _path(file, _get(file, plan.scene, "file", "scene.", str), "scene.file")
+    _fresh(file, scene, "scene.file", _get(file, plan.scene, "sha256", "scene.", str))
     urdf = _path(file, _get(file, plan.robot, "urdf", "robot.", str), "robot.urdf")
     robot_yaml = _path(file, _get(file, plan.robot, "robot_yaml", "robot.", str), "robot.robot_yaml")
     urdf_sha = _get(file, plan.robot, "urdf_sha256", "robot.", str)

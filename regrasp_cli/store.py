@@ -13,6 +13,7 @@ On-disk layout of an artefact (one HDF5 file)::
       @software_version  str            regrasp_cli.__version__ of the writer
       @created           str            ISO-8601 UTC, e.g. "2024-05-01T12:00:00Z"
       @input_sha256.<name>  str         sha256 hex of each input ("urdf", "mesh", ...)
+      @content_sha256    str            sha256 hex of the datasets and caller attributes
       @<attr>            str|int|float  caller attributes (any other name)
       <dataset>                         datasets, nested paths like "grasps/hand_in_object"
       <group>/<dataset>                 datasets of the ``groups`` argument
@@ -22,11 +23,16 @@ name ``input_sha256.<name>`` is also the field named in a :class:`StaleArtefactE
 Datasets are written in sorted order without timestamps: the same inputs give the
 same datasets; only ``@created`` differs between two builds.
 
-Freshness rules of :func:`read_artefact`: a missing file, an unreadable file or a
-different ``format`` is an :class:`InputError`; an *older* ``format_version`` or any
-input-hash difference is a :class:`StaleArtefactError` (rebuilding fixes it, and
-:func:`is_fresh` answers ``False``); a *newer* ``format_version`` is an
-:class:`InputError` (the file comes from a newer regrasp).
+Freshness rules of :func:`read_artefact`: a missing file or a different ``format`` is an
+:class:`InputError`; an *older* ``format_version`` or any input-hash difference is a
+:class:`StaleArtefactError`, and a file that cannot be read (truncated, empty, damaged)
+or whose contents do not match ``content_sha256`` a :class:`CorruptArtefactError` (for
+both, rebuilding fixes it and :func:`is_fresh` answers ``False``); a *newer*
+``format_version`` is an :class:`InputError` (the file comes from a newer regrasp).
+
+``content_sha256`` (:func:`content_digest`) covers every dataset (name, dtype, shape,
+bytes) and the caller attributes, so flipped bytes in the middle of a file, which HDF5
+itself reads without complaint, are caught when the artefact is loaded.
 
 :func:`sha256_params` hashes canonical JSON (sorted keys, no spaces, floats via
 ``repr``).  ``int`` and ``float`` are distinct (``1`` and ``1.0`` hash differently);
@@ -40,6 +46,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from datetime import datetime, timezone
@@ -48,19 +55,24 @@ from typing import Any, Protocol
 
 import h5py
 import numpy as np
+from filelock import FileLock
 
 from regrasp_cli import __version__
-from regrasp_cli.errors import InputError, StaleArtefactError
+from regrasp_cli.errors import CorruptArtefactError, InputError, StaleArtefactError
 
 __all__ = [
     "Artefact",
     "ExpectedProvenance",
     "Provenance",
+    "artefact_lock",
     "atomic_write",
     "atomic_write_bytes",
     "atomic_write_text",
+    "check_writable",
     "canonical_json",
+    "content_digest",
     "is_fresh",
+    "why_not_fresh",
     "read_artefact",
     "read_provenance",
     "sha256_bytes",
@@ -70,7 +82,8 @@ __all__ = [
 ]
 
 INPUT_PREFIX = "input_sha256."
-_PROVENANCE_ATTRS = ("format", "format_version", "software_version", "created")
+CHECKSUM_ATTR = "content_sha256"
+_PROVENANCE_ATTRS = ("format", "format_version", "software_version", "created", CHECKSUM_ATTR)
 _CHUNK = 1 << 20
 
 AttrValue = str | int | float
@@ -125,7 +138,51 @@ def sha256_params(obj: Any) -> str:
     return sha256_bytes(canonical_json(obj).encode("utf-8"))
 
 
+def content_digest(attrs: Mapping[str, AttrValue], data: Mapping[str, np.ndarray]) -> str:
+    """Hex sha256 of an artefact's contents: its caller attributes (canonical JSON) and
+    each dataset by sorted name (name, dtype, shape, little-endian bytes; strings as
+    JSON).  The same before writing and after reading."""
+    h = hashlib.sha256(canonical_json(dict(attrs)).encode("utf-8"))
+    for name in sorted(data):
+        arr = np.asarray(data[name])
+        if arr.dtype.kind in "OUS":
+            kind, payload = "str", json.dumps([str(x) for x in arr.ravel().tolist()]).encode("utf-8")
+        else:
+            a = np.ascontiguousarray(arr, dtype=arr.dtype.newbyteorder("<"))
+            kind, payload = a.dtype.str, a.tobytes()
+        h.update(f"{name}\0{kind}\0{arr.shape}\0{len(payload)}\0".encode("utf-8"))
+        h.update(payload)
+    return h.hexdigest()
+
+
 # ---------------------------------------------------------------------- atomic writes
+
+
+def check_writable(path: str | Path, field: str | None = None, folder: bool = False) -> None:
+    """Refuse, before any work, an output ``path`` (a file, or a ``folder``) that cannot
+    be written: a folder where a file is expected or the reverse, a missing parent that
+    cannot be created (a file in the way), or a folder where no file can be created
+    (probed by creating one: permission bits do not tell, e.g. for root).
+
+    Raises:
+        InputError: naming ``field`` (e.g. the command-line option) and the reason.
+    """
+    path = Path(path)
+    if path.is_dir() and not folder:
+        raise InputError(None, field, f"{path} is a folder; expected a file name")
+    if path.exists() and folder and not path.is_dir():
+        raise InputError(None, field, f"{path} exists and is not a folder")
+    existing = path if folder and path.is_dir() else path.parent
+    while not existing.exists():  # missing folders are created on writing
+        existing = existing.parent
+    if not existing.is_dir():
+        raise InputError(None, field, f"cannot create {path}: {existing} is a file, not a folder")
+    try:
+        with tempfile.TemporaryFile(dir=existing):
+            pass
+    except OSError as exc:
+        raise InputError(None, field, f"cannot write {path}: {existing} is not writable "
+                                      f"({exc.strerror or exc})") from None
 
 
 def atomic_write(path: str | Path, writer: Callable[[Path], None]) -> None:
@@ -133,12 +190,14 @@ def atomic_write(path: str | Path, writer: Callable[[Path], None]) -> None:
     which is fsynced and moved into place with ``os.replace``.
 
     The parent directory is created.  If anything fails the temp file is removed, the
-    previous ``path`` (if any) is left untouched, and the exception is re-raised.
+    previous ``path`` (if any) is left untouched, and the exception is re-raised; an
+    operating-system error (no permission, disk full, a file in the way) as an
+    :class:`InputError` naming ``path``.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         tmp.unlink(missing_ok=True)
         writer(tmp)
         fd = os.open(tmp, os.O_RDONLY | getattr(os, "O_BINARY", 0))
@@ -147,10 +206,20 @@ def atomic_write(path: str | Path, writer: Callable[[Path], None]) -> None:
         finally:
             os.close(fd)
         os.replace(tmp, path)
+    except OSError as exc:
+        _remove(tmp)
+        raise InputError(path, None, f"cannot write the file: {exc.strerror or exc}") from None
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        _remove(tmp)
         raise
     _fsync_dir(path.parent)
+
+
+def _remove(tmp: Path) -> None:
+    try:
+        tmp.unlink(missing_ok=True)
+    except OSError:
+        pass  # e.g. its folder could not be created
 
 
 def _fsync_dir(directory: Path) -> None:
@@ -274,6 +343,27 @@ def _as_storable(name: str, value: Any) -> tuple[np.ndarray, Any]:
     return arr, arr.dtype
 
 
+@contextmanager
+def artefact_lock(path: str | Path) -> Iterator[None]:
+    """Hold the inter-process lock of one artefact (``<path>.lock`` beside it): taken to
+    write it, and by a reader from its freshness check to its hash, so that two runs on
+    one cache build it once and a plan's recorded hash is the file it used.  Re-entrant
+    in one thread.  In a folder where no lock file can be made (a read-only cache),
+    nobody can write the artefact either, so there is nothing to wait for."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        lock = FileLock(str(path.with_name(path.name + ".lock")), is_singleton=True)
+        lock.acquire()
+    except OSError:
+        yield
+        return
+    try:
+        yield
+    finally:
+        lock.release()
+
+
 def write_artefact(
     path: str | Path,
     provenance: Provenance,
@@ -313,6 +403,7 @@ def write_artefact(
                 raise ValueError(f"write_artefact: dataset {full!r} given twice")
             flat[full] = arr
     stored = {name: _as_storable(name, arr) for name, arr in sorted(flat.items())}
+    digest = content_digest(user_attrs, {name: arr for name, (arr, _) in stored.items()})
 
     def writer(tmp: Path) -> None:
         with h5py.File(tmp, "w") as f:
@@ -320,32 +411,44 @@ def write_artefact(
             f.attrs["format_version"] = prov.format_version
             f.attrs["software_version"] = prov.software_version
             f.attrs["created"] = prov.created
-            for name, digest in prov.inputs.items():
-                f.attrs[INPUT_PREFIX + name] = digest
+            f.attrs[CHECKSUM_ATTR] = digest
+            for name, input_digest in prov.inputs.items():
+                f.attrs[INPUT_PREFIX + name] = input_digest
             for key, val in sorted(user_attrs.items()):
                 f.attrs[key] = val
             for name, (arr, dtype) in stored.items():
                 f.create_dataset(name, data=arr, dtype=dtype, track_times=False)
 
-    atomic_write(path, writer)
+    with artefact_lock(path):
+        atomic_write(path, writer)
     return prov
+
+
+def _damaged(path: Path, what: str, hint: str | None) -> CorruptArtefactError:
+    fix = f"rebuild it with `{hint}`" if hint else "delete it and build it again"
+    return CorruptArtefactError(path, None, f"damaged artefact: {what}; {fix}")
 
 
 @contextmanager
 def _open(path: Path, hint: str | None = None) -> Iterator[h5py.File]:
-    """Open an artefact read-only; h5py failures become one-line :class:`InputError`."""
+    """Open an artefact read-only; h5py failures become one-line errors (a file that
+    cannot be read is damaged: :class:`CorruptArtefactError`)."""
     if not path.exists():
         fix = f"; build it with `{hint}`" if hint else ""
         raise InputError(path, None, f"no such artefact (file does not exist){fix}")
+    if path.is_dir():
+        raise InputError(path, None, "expected an artefact file, found a folder")
     try:
         f = h5py.File(path, "r")
     except (OSError, ValueError, RuntimeError) as e:
-        raise InputError(path, None, f"not a readable HDF5 file ({e})") from None
+        size = path.stat().st_size
+        what = "the file is empty" if size == 0 else f"not a readable HDF5 file, {size} bytes (truncated?): {e}"
+        raise _damaged(path, what, hint) from None
     try:
         with f:
             yield f
     except (OSError, ValueError, RuntimeError, KeyError) as e:
-        raise InputError(path, None, f"not a readable HDF5 file ({e})") from None
+        raise _damaged(path, f"HDF5 cannot read it ({' '.join(str(e).split())})", hint) from None
 
 
 def _plain(value: Any) -> Any:
@@ -445,22 +548,34 @@ def read_artefact(path: str | Path, expected: ExpectedProvenance, rebuild: str |
                     data[name] = np.asarray(obj[()])
 
         f.visititems(visit)
+        stored = _plain(f.attrs.get(CHECKSUM_ATTR))
+    if stored is None:
+        raise StaleArtefactError(path, CHECKSUM_ATTR, f"written without a content checksum (regrasp "
+                                                      f"{prov.software_version or '?'}); rebuild it with `{hint}`")
+    if content_digest(attrs, data) != stored:
+        raise _damaged(path, "its contents do not match the checksum written with them (bytes changed on disk)",
+                       hint)
     return Artefact(path=path, provenance=prov, attrs=attrs, data=data)
 
 
 def is_fresh(path: str | Path, expected: ExpectedProvenance) -> bool:
-    """``True`` if ``path`` exists and matches ``expected``; ``False`` if missing or stale.
+    """``True`` if ``path`` exists, matches ``expected`` and its contents match their
+    checksum; ``False`` if missing, stale or damaged (see :func:`why_not_fresh`).
 
-    Other refusals (unreadable file, different ``format``, newer ``format_version``)
-    still raise :class:`InputError`: rebuilding would overwrite something unexpected.
+    Other refusals (different ``format``, newer ``format_version``) still raise
+    :class:`InputError`: rebuilding would overwrite something unexpected.
     """
+    return why_not_fresh(path, expected) is None
+
+
+def why_not_fresh(path: str | Path, expected: ExpectedProvenance) -> str | None:
+    """None for an artefact :func:`is_fresh` accepts; else why it must be (re)built, in
+    a few words ("missing", or the stale or damage message).  The whole file is read."""
     path = Path(path)
     if not path.exists():
-        return False
-    hint = _rebuild_hint(expected.format)
+        return "missing"
     try:
-        with _open(path, hint) as f:
-            _check(path, _provenance_of(path, f), expected, hint)
-    except StaleArtefactError:
-        return False
-    return True
+        read_artefact(path, expected)
+    except StaleArtefactError as exc:
+        return exc.message
+    return None

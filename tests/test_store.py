@@ -11,18 +11,20 @@ import numpy as np
 import pytest
 
 from regrasp_cli import __version__
-from regrasp_cli.errors import InputError, StaleArtefactError
+from regrasp_cli.errors import CorruptArtefactError, InputError, StaleArtefactError
 from regrasp_cli.store import (
     Provenance,
     atomic_write,
     atomic_write_bytes,
     atomic_write_text,
+    content_digest,
     is_fresh,
     read_artefact,
     read_provenance,
     sha256_bytes,
     sha256_file,
     sha256_params,
+    why_not_fresh,
     write_artefact,
 )
 
@@ -127,7 +129,8 @@ def test_write_artefact_failure_keeps_old_artefact(artefact: Path) -> None:
     with pytest.raises(TypeError):
         write_artefact(artefact, PROV, {"ok": np.zeros(3), "bad": np.array([object()])})
     assert artefact.read_bytes() == before
-    assert [p.name for p in artefact.parent.iterdir()] == ["grasps.h5"]
+    # no temp file left (the artefact's lock file stays, as filelock leaves it)
+    assert sorted(p.name for p in artefact.parent.iterdir()) == ["grasps.h5", "grasps.h5.lock"]
 
 
 # --------------------------------------------------------------------- round trip
@@ -189,21 +192,68 @@ def test_missing_file(tmp_path: Path) -> None:
     assert "regrasp grasps build" in e.value.message
 
 
-@pytest.mark.parametrize("content", [b"", b"garbage, not an HDF5 file\n" * 50])
-def test_garbage_file(tmp_path: Path, content: bytes) -> None:
+@pytest.mark.parametrize("content, what", [(b"", "the file is empty"),
+                                           (b"garbage, not an HDF5 file\n" * 50, "not a readable HDF5 file")])
+def test_garbage_file_is_damaged(tmp_path: Path, content: bytes, what: str) -> None:
     path = tmp_path / "bad.h5"
     path.write_bytes(content)
-    with pytest.raises(InputError, match="not a readable HDF5 file"):
+    with pytest.raises(CorruptArtefactError, match=what) as e:
         read_artefact(path, PROV)
-    with pytest.raises(InputError, match="not a readable HDF5 file"):
+    assert e.value.message.startswith("damaged artefact") and e.value.message.endswith("`regrasp grasps build`")
+    with pytest.raises(CorruptArtefactError, match=what):
         read_provenance(path)
 
 
-def test_truncated_file(artefact: Path) -> None:
+def test_truncated_file_is_damaged(artefact: Path) -> None:
     data = artefact.read_bytes()
     artefact.write_bytes(data[: len(data) // 2])
-    with pytest.raises(InputError, match="not a readable HDF5 file"):
+    with pytest.raises(CorruptArtefactError, match="truncated"):
         read_artefact(artefact, PROV)
+    assert not is_fresh(artefact, PROV)
+
+
+def _flip_middle(path: Path, n: int = 64) -> None:
+    """XOR ``n`` bytes in the middle of the file (where the datasets are)."""
+    data = bytearray(path.read_bytes())
+    mid = len(data) // 2
+    data[mid:mid + n] = bytes(b ^ 0xFF for b in data[mid:mid + n])
+    path.write_bytes(bytes(data))
+
+
+def test_flipped_bytes_that_hdf5_reads_are_caught_by_the_checksum(tmp_path: Path) -> None:
+    path = tmp_path / "big.h5"
+    write_artefact(path, PROV, {"nodes": np.random.default_rng(1).normal(size=(2000, 43))})
+    _flip_middle(path)
+    with h5py.File(path, "r") as f:  # HDF5 itself sees nothing wrong
+        assert f["nodes"].shape == (2000, 43)
+    with pytest.raises(CorruptArtefactError, match="do not match the checksum") as e:
+        read_artefact(path, PROV)
+    assert isinstance(e.value, StaleArtefactError)  # rebuilt like a stale one
+    assert not is_fresh(path, PROV)
+    assert "do not match the checksum" in why_not_fresh(path, PROV)
+
+
+def test_a_changed_attribute_is_caught_by_the_checksum(artefact: Path) -> None:
+    with h5py.File(artefact, "r+") as f:
+        f.attrs["n"] = 6
+    with pytest.raises(CorruptArtefactError):
+        read_artefact(artefact, PROV)
+
+
+def test_an_artefact_without_checksum_is_stale(artefact: Path) -> None:
+    with h5py.File(artefact, "r+") as f:
+        del f.attrs["content_sha256"]
+    with pytest.raises(StaleArtefactError) as e:
+        read_artefact(artefact, PROV)
+    assert e.value.field == "content_sha256" and not isinstance(e.value, CorruptArtefactError)
+
+
+def test_content_digest_is_the_same_before_writing_and_after_reading(artefact: Path) -> None:
+    art = read_artefact(artefact, PROV)
+    written = _datasets() | {"roadmap/level1/" + k: v for k, v in _groups()["roadmap/level1"].items()}
+    assert content_digest(art.attrs, art.data) == content_digest({"hand": "left", "n": 5, "eps": 0.5}, written)
+    other = dict(written, scores=written["scores"] + 1)
+    assert content_digest(art.attrs, other) != content_digest(art.attrs, written)
 
 
 def test_foreign_hdf5_file(tmp_path: Path) -> None:
@@ -271,5 +321,5 @@ def test_is_fresh(artefact: Path, tmp_path: Path) -> None:
         is_fresh(artefact, Provenance("regrasp.roadmap", 2, H))
     garbage = tmp_path / "garbage.h5"
     garbage.write_bytes(b"junk")
-    with pytest.raises(InputError):
-        is_fresh(garbage, PROV)
+    assert not is_fresh(garbage, PROV)  # damaged: rebuilt
+    assert why_not_fresh(tmp_path / "none.h5", PROV) == "missing" and why_not_fresh(artefact, PROV) is None

@@ -452,6 +452,40 @@ def test_changed_object_mesh_is_stale(plan_dir, base_plan):
         validate_plan(path)
 
 
+def _with_scene_copy(plan_dir: Path, plan: Plan) -> tuple[Path, Path]:
+    """The plan written with its scene copied beside it (named relative): (plan, scene)."""
+    scene = plan_dir / "scene.yaml"
+    scene.write_text(SCENE_YAML.read_text().replace("../robots/", str(SCENE_YAML.parent.parent / "robots") + "/"))
+    return _write(plan_dir, replace(plan, scene={"file": "scene.yaml", "sha256": sha256_file(scene)})), scene
+
+
+def test_a_plan_with_its_scene_unchanged_is_valid(plan_dir, base_plan):
+    path, _ = _with_scene_copy(plan_dir, base_plan)
+    assert validate_plan(path).valid
+
+
+def test_a_changed_scene_makes_the_plan_stale(plan_dir, base_plan):
+    """An obstacle moved by 28 cm since planning: the plan carries its own copy of the
+    obstacles, but it no longer plans the scene the user has."""
+    import yaml
+
+    path, scene = _with_scene_copy(plan_dir, base_plan)
+    d = yaml.safe_load(scene.read_text())
+    d["obstacles"][0]["pose"]["xyz"][0] += 0.28
+    scene.write_text(yaml.safe_dump(d, sort_keys=False))
+    with pytest.raises(StaleArtefactError, match="stale plan") as exc:
+        validate_plan(path)
+    assert exc.value.field == "scene.file" and "scene.yaml changed since planning" in exc.value.message
+
+
+def test_a_missing_scene_is_an_input_error(plan_dir, base_plan):
+    path, scene = _with_scene_copy(plan_dir, base_plan)
+    scene.unlink()
+    with pytest.raises(InputError, match="no such file") as exc:
+        validate_plan(path)
+    assert exc.value.field == "scene.file"
+
+
 def test_missing_file_is_an_input_error(plan_dir, base_plan):
     path = _write(plan_dir, base_plan)
     (plan_dir / "statuette.stl").unlink()

@@ -18,7 +18,7 @@ from rich.console import Console
 from regrasp_cli import __version__
 from regrasp_cli.bench.suite import REFERENCE, Suite, load_suite, with_overrides
 from regrasp_cli.errors import InputError
-from regrasp_cli.store import atomic_write_bytes, atomic_write_text
+from regrasp_cli.store import atomic_write_bytes, atomic_write_text, check_writable
 
 
 LIBRARIES = ("pin", "coal", "numpy", "scipy", "ompl")  # distributions whose versions a result depends on
@@ -116,8 +116,7 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
     where = "loky" if client is None else f"dask at {client.scheduler.address}"
     suite: Suite = with_overrides(load_suite(suite_file), seeds, planners, budget_s, iterations)
     out_dir = Path("bench-results") / suite.name if out_dir is None else Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(None, "--output", f"{out_dir} exists and is not a folder")
+    check_writable(out_dir, "--output", folder=True)
     plan_dir = out_dir / "plans"
     plan_dir.mkdir(parents=True, exist_ok=True)
 

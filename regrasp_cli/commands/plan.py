@@ -23,6 +23,7 @@ from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.manip.tasks import handover
 from regrasp_cli.roadmap.build import RoadmapOptions
 from regrasp_cli.scene import load_problem
+from regrasp_cli.store import check_writable
 from regrasp_cli.trajectory import Plan, write_plan
 
 
@@ -55,6 +56,7 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     from regrasp_cli.validate import validate_plan
 
     console = console or Console()
+    check_writable(out_file, "--output")  # before the work, not after it
     if planner == "ompl-rrtconnect":
         ompl_version()  # InputError naming the extra before anything is loaded
     problem = load_problem(scene, cache_dir)

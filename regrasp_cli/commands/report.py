@@ -293,6 +293,9 @@ class CliBuilder:
     def __init__(self, console: Console):
         self.console = console
 
+    def notice(self, message: str) -> None:
+        self.console.print(message, markup=False, highlight=False)
+
     def grasps(self, scene: Path, cache_dir: Path, hand: str, options) -> None:
         build_grasp_lists(scene, cache_dir, [hand], options, self.console)
 

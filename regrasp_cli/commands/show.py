@@ -14,6 +14,7 @@ from pathlib import Path
 import click
 
 from regrasp_cli.errors import InputError
+from regrasp_cli.store import check_writable
 from regrasp_cli.show.motion import MAX_FPS
 
 SIZE_RANGE = (160, 4096)  # pixels, each side of a key-frame picture
@@ -33,8 +34,7 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def _output_file(path: Path, option: str) -> None:
-    if path.is_dir():
-        raise InputError(None, option, f"{path} is a directory; expected a file name")
+    check_writable(path, option)
 
 
 def run_show(plan_file: Path, html: Path | None, png: Path | None, fps: int, size: str, source: str) -> None:
@@ -49,8 +49,8 @@ def run_show(plan_file: Path, html: Path | None, png: Path | None, fps: int, siz
     wh = parse_size(size)
     if html is not None:
         _output_file(html, "--html")
-    if png is not None and png.exists() and not png.is_dir():
-        raise InputError(None, "--png", f"{png} is a file; expected a directory for the key-frame pictures")
+    if png is not None:
+        check_writable(png, "--png", folder=True)
     view = load_plan_view(plan_file)
     if html is not None:
         from regrasp_cli.show.html import write_plan_html
