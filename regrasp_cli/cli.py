@@ -247,6 +247,18 @@ def show(plan_file: Path, html_file: Path | None, png_dir: Path | None, fps: int
 
 
 @main.command()
+@click.argument("folder", metavar="DIR", type=click.Path(path_type=Path), required=False)
+@click.option("--force", is_flag=True, help="Overwrite files already in DIR.")
+def examples(folder: Path | None, force: bool) -> None:
+    """List the shipped robots and example scenes; with DIR, copy them there to edit.
+
+    A scene names a shipped robot as `robot: builtin:NAME`."""
+    from regrasp_cli.commands.report import run_examples
+
+    run_examples(folder, force)
+
+
+@main.command()
 @click.argument("suite_file", metavar="SUITE", type=click.Path(path_type=Path))
 @click.option("-o", "--output", type=click.Path(path_type=Path), default=None, metavar="DIR",
               help="Results folder (default: bench-results/<suite name>/).")

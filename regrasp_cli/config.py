@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 
 from regrasp_cli.errors import InputError
+from regrasp_cli.examples import BUILTIN_PREFIX, builtin_robot
 from regrasp_cli.spatial import pose_matrix
 
 ROBOT_FORMAT = "regrasp.robot/1"
@@ -424,7 +425,8 @@ def load_scene_spec(path: str | Path) -> SceneSpec:
     f.only("format", "robot", "object", "obstacles", "task", "planning")
     if f.str("format") != SCENE_FORMAT:
         raise f.error("format", f"expected '{SCENE_FORMAT}', found {f.data['format']!r}")
-    robot = resolve_path(file, "robot", f.str("robot"))
+    value = f.str("robot")
+    robot = builtin_robot(file, "robot", value) if value.startswith(BUILTIN_PREFIX) else resolve_path(file, "robot", value)
 
     o = f.sub("object")
     o.only("mesh", "scale", "friction")

@@ -301,3 +301,23 @@ class CliBuilder:
 
     def roadmap(self, scene: Path, cache_dir: Path, options, jobs: int) -> None:
         build_roadmap_shown(scene, cache_dir, options, jobs, self.console)
+
+
+def run_examples(folder: Path | None, force: bool, console: Console | None = None) -> None:
+    """`regrasp examples [DIR]`: list the shipped robots and scenes, or copy them to DIR."""
+    from regrasp_cli.examples import BUILTIN_PREFIX, copy_examples, data_dir, robot_names, scene_files
+
+    console = console or Console()
+    if folder is None:
+        console.print(f"robots (in a scene: robot: {BUILTIN_PREFIX}NAME): "
+                      + ", ".join(BUILTIN_PREFIX + n for n in robot_names()), markup=False)
+        for p in scene_files():
+            console.print(f"scene: {p.relative_to(data_dir())}", markup=False)
+        console.print("copy them with: regrasp examples DIR", markup=False)
+        return
+    written = copy_examples(folder, force)
+    for p in written:
+        console.print(f"wrote {p}", markup=False, highlight=False)
+    scenes = [p for p in written if p.parent.name == "scenes"]
+    if scenes:
+        console.print(f"try: regrasp plan {scenes[0]}", markup=False, highlight=False)
