@@ -108,7 +108,7 @@ def _cached(path: Path, prov, build: bool, make, read, builder: Builder):
     """``read(path, prov)`` and the file's SHA-256, after ``make()`` when the artefact is
     missing, stale or damaged (and ``build``; else ``read`` refuses it), all under the
     artefact's lock: a concurrent run waits and reuses what this one built."""
-    with artefact_lock(path):
+    with artefact_lock(path, create=build):
         why = why_not_fresh(path, prov) if build else None
         if why is not None:
             if why != "missing":

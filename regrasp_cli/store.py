@@ -171,7 +171,7 @@ def check_writable(path: str | Path, field: str | None = None, folder: bool = Fa
     if path.is_dir() and not folder:
         raise InputError(None, field, f"{path} is a folder; expected a file name")
     if path.exists() and folder and not path.is_dir():
-        raise InputError(None, field, f"{path} exists and is not a folder")
+        raise InputError(None, field, f"{path} is a file; expected a folder")
     existing = path if folder and path.is_dir() else path.parent
     while not existing.exists():  # missing folders are created on writing
         existing = existing.parent
@@ -344,15 +344,19 @@ def _as_storable(name: str, value: Any) -> tuple[np.ndarray, Any]:
 
 
 @contextmanager
-def artefact_lock(path: str | Path) -> Iterator[None]:
+def artefact_lock(path: str | Path, create: bool = True) -> Iterator[None]:
     """Hold the inter-process lock of one artefact (``<path>.lock`` beside it): taken to
     write it, and by a reader from its freshness check to its hash, so that two runs on
     one cache build it once and a plan's recorded hash is the file it used.  Re-entrant
     in one thread.  In a folder where no lock file can be made (a read-only cache),
-    nobody can write the artefact either, so there is nothing to wait for."""
+    nobody can write the artefact either, so there is nothing to wait for; without
+    ``create``, a missing folder is not created (a reader that will not build)."""
     path = Path(path)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        if create:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        elif not path.parent.is_dir():
+            raise FileNotFoundError(path.parent)
         lock = FileLock(str(path.with_name(path.name + ".lock")), is_singleton=True)
         lock.acquire()
     except OSError:

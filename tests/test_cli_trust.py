@@ -45,11 +45,17 @@ def _copy(built: Path, to: Path) -> Path:
     return to
 
 
-def _artefact(cache: Path, folder: str, contains: str = "") -> Path:
-    """The one artefact of the small options in ``folder`` (the newest if several)."""
-    found = sorted((p for p in (cache / folder).glob("*.h5") if contains in p.name), key=lambda p: p.stat().st_mtime)
-    assert found, f"no artefact in {cache / folder}"
-    return found[-1]
+def _used(cache: Path, key: str) -> Path:
+    """The artefact a `plan --no-build` of the small options reads from ``cache``, by the
+    key of its recorded hash (``grasps_right``, ``grasps_left``, ``roadmap``): the cache
+    also holds artefacts of other options, built by other tests."""
+    out = cache.parent / "probe.json"
+    result = plan(cache, out, "--no-build", "--no-check")
+    assert result.exit_code == 0, (result.output, result.exception)
+    digest = _recorded(out)[key]
+    out.unlink()
+    (path,) = [p for p in cache.glob("*/*.h5") if sha256_file(p) == digest]
+    return path
 
 
 def _damage(path: Path, how: str) -> None:
@@ -77,9 +83,7 @@ def _recorded(plan_file: Path) -> dict[str, str]:
                                          ("grasps", "empty")])
 def test_a_damaged_artefact_is_refused_with_no_build(built, tmp_path, folder, how):
     cache = _copy(built, tmp_path / "cache")
-    path = _artefact(cache, folder, "right" if folder == "grasps" else "")
-    used_by_plan = set(_recorded_files(cache))
-    assert path.name in used_by_plan  # the artefact the plan reads
+    path = _used(cache, "grasps_right" if folder == "grasps" else "roadmap")
     _damage(path, how)
     out = tmp_path / "plan.json"
     result = plan(cache, out, "--no-build")
@@ -87,19 +91,9 @@ def test_a_damaged_artefact_is_refused_with_no_build(built, tmp_path, folder, ho
     assert not out.exists(), line
 
 
-def _recorded_files(cache: Path) -> list[str]:
-    """Names of the artefacts a `plan --no-build` of the small options reads."""
-    out = cache.parent / "probe.json"
-    result = plan(cache, out, "--no-build", "--no-check")
-    assert result.exit_code == 0, (result.output, result.exception)
-    hashes = set(_recorded(out).values())
-    out.unlink()
-    return [p.name for p in cache.glob("*/*.h5") if sha256_file(p) in hashes]
-
-
 def test_a_damaged_grasp_list_is_rebuilt_with_a_line_saying_so(built, tmp_path):
     cache = _copy(built, tmp_path / "cache")
-    path = _artefact(cache, "grasps", "right")
+    path = _used(cache, "grasps_right")
     before = _checksum(path)
     _damage(path, "flipped")
     out = tmp_path / "plan.json"

@@ -64,7 +64,7 @@ def test_show_into_a_file_or_a_directory(small_plan, tmp_path):
     a_file = tmp_path / "frames"
     a_file.write_text("not a directory")
     assert_one_error_line(run("show", small_plan, "--png", a_file), "--png", "is a file")
-    assert_one_error_line(run("show", small_plan, "--html", tmp_path), "--html", "is a directory")
+    assert_one_error_line(run("show", small_plan, "--html", tmp_path), "--html", "is a folder")
 
 
 def test_grasps_png_needs_the_scene(cache_dir, tmp_path):
