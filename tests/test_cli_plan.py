@@ -166,17 +166,21 @@ def test_validate_rejects_a_waypoint_in_the_desk(solved, problem):
 
 
 def test_validate_rejects_a_jump(solved, problem):
-    """A middle waypoint of the longest phase with one joint of the free arm moved by 1 rad,
-    the times unchanged: a segment next to it is too short for that move."""
+    """The interior waypoint with the shortest segments on both sides, one joint of the free
+    arm moved by 1 rad, the times unchanged: a segment next to it is too short for that move."""
     _, src = solved
     robot = problem.robot
     d0 = json.loads(src.read_text())
-    k = max(range(len(d0["phases"])), key=lambda i: len(d0["phases"][i]["waypoints"]))
+
+    def slack(k: int, i: int) -> float:  # the longer of the two segments around waypoint i of phase k
+        t = d0["phases"][k]["times"]
+        return max(t[i] - t[i - 1], t[i + 1] - t[i])
+
+    k, i = min(((k, i) for k, p in enumerate(d0["phases"]) for i in range(1, len(p["waypoints"]) - 1)),
+               key=lambda ki: slack(*ki))
     phase = d0["phases"][k]
-    assert len(phase["waypoints"]) >= 3
     free = "left" if "left" not in phase["holding"] else "right"
     j = int(robot.hands[free].arm_idx[1])
-    i = len(phase["waypoints"]) // 2
     value = phase["waypoints"][i][j]
     value += 1.0 if value + 1.0 <= robot.upper[j] else -1.0
 

@@ -67,6 +67,7 @@ class OnlineOptions:
     # like rrt-connect's, and 10 s cut it short on seeds where ours gets its full 3000
     certify: bool = True  # query worlds keep cartesian_step / 2 of clearance (module docstring)
     shortcut_iterations: int = 12
+    prune: bool = True  # then drop the waypoints their neighbours see past: each is a stop of the motion
     acceleration: float = 3.0  # rad/s^2 for every joint (URDFs carry no acceleration limits)
     ik: IKOptions = IKOptions(restarts=2, max_iters=40)
 

@@ -95,6 +95,20 @@ def path_length(path: np.ndarray, distance) -> float:
     return float(sum(distance(path[i], path[i + 1]) for i in range(len(path) - 1)))
 
 
+def prune(path: np.ndarray, segment_free: Callable[[np.ndarray, np.ndarray], bool]) -> np.ndarray:
+    """Drop every interior waypoint whose neighbours see each other (one pass, first to
+    last): each waypoint is a stop of the timed motion (:mod:`motion.timing`), and the
+    random shortcuts add two per cut.  The ends stay; the path never gets longer (the
+    triangle inequality).  Returns a new array (k, d), k >= 2."""
+    path = [np.asarray(q, float) for q in path]
+    out = [path[0]]
+    for k in range(1, len(path) - 1):
+        if not segment_free(out[-1], path[k + 1]):
+            out.append(path[k])
+    out.append(path[-1])
+    return np.array(out)
+
+
 def shortcut(path: np.ndarray, segment_free: Callable[[np.ndarray, np.ndarray], bool], distance,
              rng: np.random.Generator, iterations: int = 100) -> np.ndarray:
     """Random shortcuts: pick two points on the path (on its segments, not only at its

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from regrasp_cli.motion.rrt import RRTOptions, path_length, rrt_connect, shortcut
+from regrasp_cli.motion.rrt import RRTOptions, path_length, prune, rrt_connect, shortcut
 
 
 def euclid(q, qs):
@@ -83,3 +83,25 @@ def test_shortcut_of_a_zigzag_in_free_space_is_the_straight_line():
     path = np.array([[0.0, 0.0], [0.2, 0.5], [0.4, 0.0], [0.6, 0.5], [1.0, 0.0]])
     short = shortcut(path, lambda a, b: True, euclid, np.random.default_rng(0), iterations=200)
     assert path_length(short, euclid) < 1.05 * 1.0
+
+
+def test_prune_keeps_only_the_waypoints_the_wall_needs():
+    """A path from the left of the wall to the right through the gap, with extra
+    waypoints on each straight stretch: only the two points that turn through the gap
+    stay (a corner before and after the wall: a line from the start to the gap's middle
+    meets the wall at y = 0.48, below the gap), the ends are kept, and it is free."""
+    free, segment = wall_world(gap_y=(0.49, 0.51))
+    a, g0, g1, b = np.array([0.1, 0.1]), np.array([0.47, 0.5]), np.array([0.53, 0.5]), np.array([0.9, 0.1])
+    path = np.array([a, (a + g0) / 2, g0, (g0 + g1) / 2, g1, g1 + (b - g1) / 3, g1 + 2 * (b - g1) / 3, b])
+    out = prune(path, segment)
+    np.testing.assert_array_equal(out, np.array([a, g0, g1, b]))
+    assert all(segment(p, q) for p, q in zip(out[:-1], out[1:]))
+    assert path_length(out, euclid) <= path_length(path, euclid) + 1e-12
+
+
+def test_prune_of_a_free_zigzag_is_the_straight_line_and_of_two_points_the_same():
+    free, segment = wall_world(gap_y=(0.0, 1.0))  # no wall
+    zigzag = np.array([[0.1, 0.1], [0.2, 0.4], [0.3, 0.1], [0.4, 0.4]])
+    np.testing.assert_array_equal(prune(zigzag, segment), zigzag[[0, -1]])
+    two = zigzag[:2]
+    np.testing.assert_array_equal(prune(two, segment), two)
