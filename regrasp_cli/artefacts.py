@@ -7,11 +7,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Protocol
 
-from regrasp_cli.errors import InputError
+from regrasp_cli.errors import InputError, StaleArtefactError
 from regrasp_cli.grasp.build import BuildOptions, GraspList
 from regrasp_cli.roadmap.build import RoadmapArtefact, RoadmapOptions
 from regrasp_cli.scene import Problem
-from regrasp_cli.store import artefact_lock, sha256_file, why_not_fresh
+from regrasp_cli.store import artefact_lock, sha256_file
 
 
 class Builder(Protocol):
@@ -109,11 +109,15 @@ def _cached(path: Path, prov, build: bool, make, read, builder: Builder):
     missing, stale or damaged (and ``build``; else ``read`` refuses it), all under the
     artefact's lock: a concurrent run waits and reuses what this one built."""
     with artefact_lock(path, create=build):
-        why = why_not_fresh(path, prov) if build else None
-        if why is not None:
-            if why != "missing":
-                builder.notice(f"rebuilding {path}: {why.split('; rebuild it with')[0]}")
-            make()
+        if build:
+            if not path.is_file():
+                make()
+            else:
+                try:  # read once: the freshness check is the read itself
+                    return read(path, prov), sha256_file(path)
+                except StaleArtefactError as exc:
+                    builder.notice(f"rebuilding {path}: {exc.message.split('; rebuild it with')[0]}")
+                    make()
         return read(path, prov), sha256_file(path)
 
 
