@@ -15,7 +15,10 @@ object rigidly during all of it), ``touching`` (the hands whose fingers close on
 off or move on the object), ``placement`` (the placement id where the object rests, for
 the kinds in which it rests, else null), its waypoints (full configurations in the order
 of ``joint_names``, joined by straight joint-space segments) and their times (s from the
-plan start; stop at every waypoint, :mod:`regrasp_cli.motion.timing`), and optionally
+plan start at which the motion passes them), with ``blends`` (a radius per waypoint: the
+corner cut by a parabolic blend, 0 at a stop) and ``timing`` (the path speed on a grid,
+:mod:`regrasp_cli.motion.blend`), or without both (stop at every waypoint, trapezoids of
+:mod:`regrasp_cli.motion.timing`), and optionally
 per-waypoint ``object_poses`` (4x4 in W) and ``contacts`` (per waypoint, a list of
 ``{finger, point, normal}`` in the object frame) for motions where the object moves
 relative to the palm.  The first waypoint of a phase equals the last of the previous
@@ -39,6 +42,8 @@ import numpy as np
 
 from regrasp_cli.errors import InputError
 from regrasp_cli.manip.modes import KIND_NAMES, Kind
+from regrasp_cli.motion.blend import BlendedPath, Timing, blended_path, trajectory
+from regrasp_cli.motion.timing import evaluate_trajectory
 from regrasp_cli.store import atomic_write_text
 
 FORMAT = "regrasp.plan/2"
@@ -74,6 +79,21 @@ class Phase:
     times: np.ndarray  # (k,) s from the plan start
     object_poses: np.ndarray | None = None  # (k, 4, 4) X_WO per waypoint, optional
     contacts: tuple[tuple[dict, ...], ...] | None = None  # per waypoint {finger, point, normal} in O
+    blends: np.ndarray | None = None  # (k,) blend radius per waypoint, 0 at a stop (motion.blend); None: every one a stop
+    timing: Timing | None = None  # path speed on a grid, with ``blends`` (motion.blend); None: stop-to-stop trapezoids
+
+    def path(self) -> BlendedPath | None:
+        """The geometric path with its blends, or None for a stop-at-every-waypoint phase."""
+        return None if self.timing is None else blended_path(self.waypoints, self.blends)
+
+    def evaluate(self, t, velocity: np.ndarray, acceleration: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and velocities (m, nq) at plan times t (m,), clamped to the phase;
+        ``velocity``, ``acceleration`` (nq,): the limits the trapezoids of a phase without
+        ``timing`` were computed with.  Raises ValueError on inconsistent timing."""
+        if self.timing is None:
+            return evaluate_trajectory(self.waypoints, self.times, velocity, acceleration, t)
+        q, qd, _ = trajectory(self.path(), self.timing, t)
+        return q, qd
 
 
 @dataclass(frozen=True)
@@ -138,6 +158,9 @@ def _phase_dict(p: Phase) -> dict:
         d["object_poses"] = p.object_poses
     if p.contacts is not None:
         d["contacts"] = [list(c) for c in p.contacts]
+    if p.timing is not None:
+        d["blends"] = p.blends
+        d["timing"] = {"s": p.timing.s, "speed": p.timing.sd, "t": p.timing.t}
     return d
 
 
@@ -310,7 +333,25 @@ def _phase(r: _Reader, p: Any, i: int, nq: int, grasps: dict[str, PlanGrasp],
         if len(c) != len(wp) or not all(isinstance(x, list) for x in c):
             raise r.error(w + "contacts", f"expected one list of contacts per waypoint ({len(wp)})")
         contacts = tuple(tuple(x) for x in c)
-    return Phase(r.get(p, "name", w, str), kind, holding, touching, placement, wp, times, poses, contacts)
+    blends, timing = _timing(r, p, w, wp)
+    return Phase(r.get(p, "name", w, str), kind, holding, touching, placement, wp, times, poses, contacts,
+                 blends, timing)
+
+
+def _timing(r: _Reader, p: dict, w: str, wp: np.ndarray) -> tuple[np.ndarray | None, Timing | None]:
+    """A phase's ``blends`` and ``timing``: both or neither, of consistent shapes (a speed
+    grid of g >= 2 points, s and t increasing); whether they fit the waypoints is the
+    validator's business."""
+    if p.get("timing") is None and p.get("blends") is None:
+        return None, None
+    blends = r.array(r.get(p, "blends", w, list), w + "blends", (len(wp),))
+    tm = r.get(p, "timing", w, dict)
+    s, sd, t = (r.array(r.get(tm, k, w + "timing.", list), f"{w}timing.{k}", (None,)) for k in ("s", "speed", "t"))
+    if len(s) < 2 or sd.shape != s.shape or t.shape != s.shape:
+        raise r.error(w + "timing", f"expected s, speed and t of one length >= 2, found {len(s)}, {len(sd)}, {len(t)}")
+    if np.any(np.diff(s) <= 0) or np.any(np.diff(t) <= 0) or np.any(sd < 0):
+        raise r.error(w + "timing", "expected s and t strictly increasing and speed >= 0")
+    return blends, Timing(s, sd, t)
 
 
 def plan_from_dict(d: Any, file: Path) -> Plan:

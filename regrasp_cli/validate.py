@@ -6,10 +6,15 @@ motion from each phase's ``kind``, ``holding``, ``touching`` and ``placement``, 
 its name:
 
 * **continuity**: each phase starts where the previous one ended;
-* **timing**: times start at 0, never decrease, join up between phases, and give every
-  straight segment at least its minimal stop-to-stop duration (:mod:`motion.timing`);
+* **timing**: times start at 0, never decrease, join up between phases.  A phase that
+  stops at every waypoint gives every straight segment at least its minimal stop-to-stop
+  duration (:mod:`motion.timing`).  A phase with blends and a speed grid
+  (:mod:`motion.blend`) has a grid whose times follow from its speeds, speed 0 at its
+  stops, waypoint times at their knots, and joint velocities and accelerations within the
+  limits at every ``dt`` (and at every grid point);
 * **limits**: joint position limits at the waypoints (segments are straight in joint
-  space, so the end points bound them);
+  space and blends stay in the convex hull of their control points, so the waypoints
+  bound them);
 * **attachment**: the object's world pose X_WO, followed through the phases, is where the
   holding hands' grasps say it is, the holding fingers stay closed, it never jumps between
   phases (a resting phase's placement is where the previous phase left the object), the
@@ -18,7 +23,7 @@ its name:
 * **grasp**: contacts on the object surface, normals along the surface normal, force
   closure (Saut et al. 2010, §IV-A-3), fingertip spheres on their contacts when the hand
   takes the object;
-* **collision**: every segment sampled finely enough that no joint moves more than
+* **collision**: every segment (and blend curve) sampled finely enough that no joint moves more than
   ``resolution`` and no robot point more than ``cartesian_step`` between samples (the
   bound of :mod:`motion.local`), against the robot itself, the obstacles and the object.
   Where every joint carried by the holding hand's grasp-frame joint (its fingers) keeps
@@ -44,6 +49,7 @@ from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collision_world
 from regrasp_cli.model.robot import Kinematics, Robot
 from regrasp_cli.motion.local import held_reach, joint_reach
+from regrasp_cli.motion.blend import bezier_points, bezier_steps, grid_times, trajectory
 from regrasp_cli.motion.timing import segment_duration
 from regrasp_cli.parallel import ordered_map
 from regrasp_cli.replay import JOINT_TOL, Carry, Inputs, follow, load_inputs
@@ -119,6 +125,10 @@ def timing_issues(phase: Phase, previous: Phase | None, velocity: np.ndarray, ac
     if abs(t[0] - t0) > TIME_TOL:
         what = "the plan's start (0 s)" if previous is None else f"the end of phase {previous.name}"
         out.append(Issue(phase.name, 0, "timing", f"starts at {t[0]:.6g} s, not at {what} ({t0:.6g} s)"))
+    if phase.timing is not None:
+        if np.any(np.diff(t) < 0):
+            out.append(Issue(phase.name, int(np.argmax(np.diff(t) < 0)) + 1, "timing", "time goes back"))
+        return out
     for i, (dq, dt) in enumerate(zip(np.diff(phase.waypoints, axis=0), np.diff(t))):
         need = segment_duration(dq, velocity, acceleration)
         if dt < 0:
@@ -126,6 +136,51 @@ def timing_issues(phase: Phase, previous: Phase | None, velocity: np.ndarray, ac
         elif dt < need * (1 - DURATION_RTOL):
             out.append(Issue(phase.name, i + 1, "timing", f"segment {i}->{i + 1} lasts {dt:.6g} s but needs "
                                                           f"{need:.6g} s under the velocity and acceleration limits"))
+    return out
+
+
+def smooth_timing_issues(phase: Phase, velocity: np.ndarray, acceleration: np.ndarray, dt: float,
+                         names: tuple[str, ...]) -> list[Issue]:
+    """A phase with blends: its grid's times follow from its speeds (constant path
+    acceleration between grid points), the speed is 0 at its stops, the waypoint times
+    are those of their knots, and the joint velocities and accelerations are within the
+    limits at every ``dt`` and at both sides of every grid point."""
+    tm, out = phase.timing, []
+    issue = lambda i, msg: out.append(Issue(phase.name, i, "timing", msg))  # noqa: E731
+    try:
+        path = phase.path()
+    except ValueError as exc:
+        issue(None, f"the blends do not fit the waypoints: {exc}")
+        return out
+    if abs(tm.s[0]) > 1e-9 or abs(tm.s[-1] - path.length) > 1e-6 * max(1.0, path.length):
+        issue(None, f"the speed grid spans s in [{tm.s[0]:.9g}, {tm.s[-1]:.9g}], but the path through the "
+                    f"waypoints is {path.length:.9g} long")
+        return out
+    expected = grid_times(tm.s, tm.sd)
+    if not np.all(np.isfinite(expected)) or np.max(np.abs(expected + tm.t[0] - tm.t)) > 1e-6 * max(1.0, tm.duration):
+        issue(None, "the speed grid's times do not follow from its speeds (constant path acceleration between "
+                    "grid points)")
+        return out
+    if abs(tm.t[0] - phase.times[0]) > TIME_TOL or abs(tm.t[-1] - phase.times[-1]) > 1e-6:
+        issue(None, f"the speed grid spans [{tm.t[0]:.6g}, {tm.t[-1]:.6g}] s, not the phase's "
+                    f"[{phase.times[0]:.6g}, {phase.times[-1]:.6g}] s")
+    stops = path.starts[path.stops]
+    sd_at = np.interp(stops, tm.s, tm.sd)
+    if np.any(sd_at > 1e-9):
+        i = int(np.searchsorted(path.knots, stops[int(np.argmax(sd_at))] - 1e-9))
+        issue(i, f"passes a stop (a corner without a blend) at speed {float(sd_at.max()):.3g}")
+    knot_t = np.interp(path.knots, tm.s, tm.t)
+    bad = np.flatnonzero(np.abs(knot_t - phase.times) > 1e-6)
+    if len(bad):
+        issue(int(bad[0]), f"time {phase.times[bad[0]]:.6g} s, but the motion passes it at {knot_t[bad[0]]:.6g} s")
+    t = np.concatenate([np.arange(tm.t[0], tm.t[-1], dt), tm.t, np.nextafter(tm.t[1:], -np.inf)])
+    _, qd, qdd = trajectory(path, tm, t)
+    for what, x, lim in (("velocity", qd, velocity), ("acceleration", qdd, acceleration)):
+        ratio = np.abs(x) / lim
+        if ratio.max() > 1 + DURATION_RTOL:
+            k, j = np.unravel_index(int(np.argmax(ratio)), ratio.shape)
+            i = int(np.searchsorted(phase.times, t[k], side="right") - 1)
+            issue(i, f"{names[j]} {what} {abs(x[k, j]):.6g} exceeds its limit {lim[j]:.6g} at {t[k]:.6g} s")
     return out
 
 
@@ -232,24 +287,52 @@ def _where(i: int, s: float) -> tuple[int, str]:
 
 def collision_issues(phase: Phase, world: CollisionWorld, reach: np.ndarray, resolution: float,
                      cartesian_step: float) -> tuple[list[Issue], int]:
-    """The first waypoint, then the samples of each segment in order (its end included);
-    the first colliding sample of a segment is reported with its colliding pairs, at most
+    """The first waypoint, then the samples of each piece in order (its end included): the
+    straight segments, or for a phase with blends its straight pieces and blend curves;
+    the first colliding sample of a piece is reported with its colliding pairs, at most
     :data:`MAX_COLLISIONS` per phase.  Returns (issues, configurations checked)."""
     q, out = phase.waypoints, []
     if not world.is_free(q[0]):
         out.append(_collision(phase, world, q[0], 0, "at waypoint 0"))
     n_checked = 1
-    for i in range(len(q) - 1):
+    for i, (A, C, B), curved in _pieces(phase):
         if len(out) >= MAX_COLLISIONS:
             break
-        n = segment_steps(q[i + 1] - q[i], reach, resolution, cartesian_step)
-        for k in range(1, n + 1):
-            qs = q[i] + (k / n) * (q[i + 1] - q[i]) if k < n else q[i + 1]
+        if curved:
+            n = bezier_steps(A, C, B, reach, resolution, cartesian_step)
+            samples = bezier_points(A, C, B, np.arange(1, n + 1) / n)
+        else:
+            n = segment_steps(B - A, reach, resolution, cartesian_step)
+            samples = A + (np.arange(1, n + 1) / n)[:, None] * (B - A)
+            samples[-1] = B
+        for k, qs in enumerate(samples, 1):
             n_checked += 1
             if not world.is_free(qs):
-                out.append(_collision(phase, world, qs, *_where(i, k / n)))
-                break  # one issue per segment
+                where = (i, f"on the blend at waypoint {i} (u = {k / n:.3f})") if curved else _where(i, k / n)
+                out.append(_collision(phase, world, qs, *where))
+                break  # one issue per piece
     return out, n_checked
+
+
+def _pieces(phase: Phase):
+    """(waypoint index, (A, C, B), curved) of each piece: the segments between waypoints,
+    or the straight pieces and blends of a phase with blends (a straight piece's A and B
+    are its ends); the segments too when the blends do not fit (a timing issue)."""
+    try:
+        path = phase.path()
+    except ValueError:
+        path = None
+    if path is None:
+        for i in range(len(phase.waypoints) - 1):
+            a, b = phase.waypoints[i], phase.waypoints[i + 1]
+            yield i, (a, 0.5 * (a + b), b), False
+        return
+    curved = np.abs(path.A - 2 * path.C + path.B).max(axis=1) > 0
+    mid = 0.5 * (path.starts[:-1] + path.starts[1:])
+    where = np.searchsorted(path.knots, mid, side="right") - 1
+    for k in range(len(path.A)):
+        i = int(where[k] + 1) if curved[k] else int(where[k])  # a blend is around the knot after mid
+        yield min(i, len(phase.waypoints) - 1), (path.A[k], path.C[k], path.B[k]), bool(curved[k])
 
 
 def _collision(phase: Phase, world: CollisionWorld, q: np.ndarray, waypoint: int, where: str) -> Issue:
@@ -391,7 +474,7 @@ def _phase_collisions(j: dict, k: int) -> tuple[list[Issue], int, float]:
 
 
 def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: float = 0.005,
-                  jobs: int = 2) -> ValidationReport:
+                  jobs: int = 2, dt: float = 0.002) -> ValidationReport:
     """Check the plan file ``path`` (see the module docstring).
 
     Args:
@@ -399,13 +482,14 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         resolution: largest joint step (rad or m) between two collision-checked samples.
         cartesian_step: largest displacement (m) of any robot point between two samples.
         jobs: processes for the collision checks of the phases (the report is the same).
+        dt: time step (s) at which velocities and accelerations of smooth phases are checked.
 
     Raises:
         InputError: the plan is malformed or incomplete, a file it names is missing, or
             stale (:class:`~regrasp_cli.errors.StaleArtefactError`: its SHA-256 changed).
     """
-    if not (resolution > 0 and cartesian_step > 0):
-        raise ValueError("resolution and cartesian_step must be > 0")
+    if not (resolution > 0 and cartesian_step > 0 and dt > 0):
+        raise ValueError("resolution, cartesian_step and dt must be > 0")
     path = Path(path)
     plan = read_plan(path)
     if plan.status == "failed":
@@ -423,6 +507,8 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         previous = plan.phases[k - 1] if k else None
         found = continuity_issues(phase, previous, robot.joint_names)
         found += timing_issues(phase, previous, inputs.velocity, inputs.acceleration)
+        if phase.timing is not None:
+            found += smooth_timing_issues(phase, inputs.velocity, inputs.acceleration, dt, robot.joint_names)
         found += limit_issues(phase, robot.joint_names, inputs.lower, inputs.upper)
         found += attachment_issues(plan, phase, kin, carries[k])
         found += kind_issues(phase, robot)

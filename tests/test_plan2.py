@@ -66,6 +66,8 @@ def join(first: dict, second: dict) -> dict:
         p["name"] += suffix
         p["placement"] = rename.get(p["placement"], p["placement"])
         p["times"] = [t + dt for t in p["times"]]
+        if p.get("timing"):
+            p["timing"]["t"] = [t + dt for t in p["timing"]["t"]]
         return p
 
     t_end = first["phases"][-1]["times"][-1]

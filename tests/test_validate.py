@@ -31,6 +31,7 @@ from regrasp_cli.grasp.workspace import hand_workspace
 from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import ObjectPlacement
 from regrasp_cli.model.robot import Kinematics
+from regrasp_cli.motion.blend import Timing, blended_path, choose_radii, grid_times, time_optimal
 from regrasp_cli.motion.timing import time_parameterise
 from regrasp_cli.replay import Carry
 from regrasp_cli.spatial import inverse
@@ -626,3 +627,107 @@ def test_fingers_closed_into_the_held_object_are_a_collision_once(plan_dir, base
     hit = next(i for i in carry if i.check == "collision")
     assert "held object against its hand" in hit.message and "object" in hit.message
     assert ("attachment", "carry") in {(i.check, i.phase) for i in report.issues}
+
+
+# ------------------------------------------------------------------ smooth phases (motion/blend.py)
+
+
+def _smooth(plan: Plan, fraction: float = 0.4) -> Plan:
+    """``plan`` with every phase blended at its interior corners (``fraction`` of the
+    shorter segment; 0: stops) and timed by TOPP-RA, each starting when the previous ends."""
+    velocity, acceleration = _limits(plan)
+    out, t0 = [], 0.0
+    for p in plan.phases:
+        radii = choose_radii(p.waypoints, lambda *_: fraction > 0, fraction=max(fraction, 1e-3))
+        path = blended_path(p.waypoints, radii)
+        timing = time_optimal(path, velocity, acceleration).shifted(t0)
+        out.append(replace(p, times=np.interp(path.knots, timing.s, timing.t), blends=radii, timing=timing))
+        t0 = timing.t[-1]
+    return replace(plan, phases=tuple(out))
+
+
+def _with_speeds(plan: Plan, name: str, sd: np.ndarray) -> Plan:
+    """Phase ``name`` with the speed grid ``sd`` and the times that follow from it."""
+    p = _phase(plan, name)
+    t = grid_times(p.timing.s, sd) + p.timing.t[0]
+    timing = Timing(p.timing.s, sd, t)
+    return _with_phase(plan, name, timing=timing, times=np.interp(p.path().knots, timing.s, timing.t))
+
+
+@pytest.fixture(scope="module")
+def smooth_plan(base_plan) -> Plan:
+    return _smooth(base_plan)
+
+
+def test_a_smooth_plan_is_valid_and_faster(plan_dir, smooth_plan, base_plan):
+    report = validate_plan(_write(plan_dir, smooth_plan))
+    assert report.issues == ()
+    cut = [p.name for p in smooth_plan.phases if np.any(p.blends > 0)]
+    assert cut == ["carry", "rest"]  # the phases with an interior corner
+    assert smooth_plan.duration < base_plan.duration
+    reread = validate_plan(_write(plan_dir, _smooth(base_plan, 0.0)))  # stops everywhere: still valid
+    assert reread.issues == ()
+
+
+def test_a_speed_grid_beyond_the_limits(plan_dir, smooth_plan):
+    sd = _phase(smooth_plan, "carry").timing.sd * 1.1  # accelerations x 1.21
+    report = validate_plan(_write(plan_dir, _retime_after(_with_speeds(smooth_plan, "carry", sd), "carry")))
+    timing = [i for i in report.issues if i.check == "timing"]
+    assert timing and all(i.phase == "carry" for i in timing)
+    assert any("acceleration" in i.message and "exceeds its limit" in i.message for i in timing)
+
+
+def _retime_after(plan: Plan, name: str) -> Plan:
+    """The phases after ``name`` shifted to start where it now ends."""
+    phases, t_end, after = [], None, False
+    for p in plan.phases:
+        if after:
+            dt = t_end - p.times[0]
+            p = replace(p, times=p.times + dt, timing=p.timing.shifted(dt))
+            t_end = p.times[-1]
+        if p.name == name:
+            after, t_end = True, p.times[-1]
+        phases.append(p)
+    return replace(plan, phases=tuple(phases))
+
+
+def test_a_stop_passed_at_speed(plan_dir, base_plan):
+    plan = _smooth(base_plan, 0.0)  # carry stops at its middle waypoint
+    p = _phase(plan, "carry")
+    sd = p.timing.sd.copy()
+    k = int(np.searchsorted(p.timing.s, p.path().knots[1]))
+    sd[k] = 0.5 * max(sd[k - 1], sd[k + 1], 0.1)
+    report = validate_plan(_write(plan_dir, _retime_after(_with_speeds(plan, "carry", sd), "carry")))
+    assert any(i.check == "timing" and i.phase == "carry" and "passes a stop" in i.message for i in report.issues)
+
+
+def test_times_that_do_not_follow_from_the_speeds(plan_dir, smooth_plan):
+    p = _phase(smooth_plan, "rest")
+    t = p.timing.t.copy()
+    t[3:-1] -= 0.5 * (t[3] - t[2])  # grid points 3 .. g-2 earlier: one interval shorter, one longer
+    report = validate_plan(_write(plan_dir, _with_phase(smooth_plan, "rest", timing=Timing(p.timing.s, p.timing.sd, t))))
+    assert [(i.phase, i.check) for i in report.issues] == [("rest", "timing")]
+    assert "do not follow from its speeds" in report.issues[0].message
+
+
+def test_a_waypoint_time_off_its_knot(plan_dir, smooth_plan):
+    times = _phase(smooth_plan, "carry").times.copy()
+    times[1] += 0.05
+    report = validate_plan(_write(plan_dir, _with_phase(smooth_plan, "carry", times=times)))
+    assert [(i.phase, i.waypoint, i.check) for i in report.issues] == [("carry", 1, "timing")]
+
+
+def test_blends_that_do_not_fit_the_waypoints(plan_dir, smooth_plan):
+    p = _phase(smooth_plan, "carry")
+    blends = p.blends.copy()
+    blends[1] = 10.0
+    report = validate_plan(_write(plan_dir, _with_phase(smooth_plan, "carry", blends=blends)))
+    assert any(i.check == "timing" and "do not fit" in i.message for i in report.issues)
+
+
+def test_a_plan_with_blends_but_no_timing_is_refused(plan_dir, smooth_plan):
+    d = plan_to_dict(smooth_plan)
+    del d["phases"][1]["timing"]
+    with pytest.raises(InputError, match=r"phases\[1\]\.timing"):
+        validate_plan(_write_dict(plan_dir, d))
+

@@ -67,6 +67,8 @@ class OnlineOptions:
     # like rrt-connect's, and 10 s cut it short on seeds where ours gets its full 3000
     certify: bool = True  # query worlds keep cartesian_step / 2 of clearance (module docstring)
     shortcut_iterations: int = 12
+    partial_shortcuts: int = 20  # then one joint group at a time (motion.rrt.partial_shortcut)
+    blend: bool = True  # cut the corners where the curve is free, and time without stopping there (motion.blend)
     prune: bool = True  # then drop the waypoints their neighbours see past: each is a stop of the motion
     acceleration: float = 3.0  # rad/s^2 for every joint (URDFs carry no acceleration limits)
     ik: IKOptions = IKOptions(restarts=2, max_iters=40)
@@ -119,10 +121,10 @@ class Scratch:
         """The certified counterpart of ``world`` (itself when certification is off)."""
         return self.world(*world.spec, certified=True)
 
-    def segment_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray) -> bool:
+    def _local(self, world: "Placed") -> LocalPlanner:
         obj = world.world.object
         if obj is None or obj.attached_to is None:
-            return self.local.segment_free(world, q0, q1)
+            return self.local
         # a held object reaches farther than the robot: denser samples for its Cartesian bound
         k = (obj.attached_to, np.round(world.X_PO, 12).tobytes())
         local = self._held.get(k)
@@ -130,7 +132,14 @@ class Scratch:
             reach = held_reach(self.problem.robot, self.local.reach, obj.attached_to,
                                np.asarray(self.problem.object.mesh.vertices), world.X_PO)
             local = self._held[k] = LocalPlanner(self.local.resolution, self.local.margin, reach)
-        return local.segment_free(world, q0, q1)
+        return local
+
+    def segment_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray) -> bool:
+        return self._local(world).segment_free(world, q0, q1)
+
+    def blend_free(self, world: "Placed", A: np.ndarray, C: np.ndarray, B: np.ndarray) -> bool:
+        """The blend curve A, C, B of :mod:`motion.blend`, checked like a segment."""
+        return self._local(world).blend_free(world, A, C, B)
 
     def path_free(self, world: CollisionWorld, path: np.ndarray) -> bool:
         return all(self.segment_free(world, a, b) for a, b in zip(path[:-1], path[1:]))

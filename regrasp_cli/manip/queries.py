@@ -31,7 +31,7 @@ from regrasp_cli.manip.context import Placed, Scratch
 from regrasp_cli.roadmap.build import RoadmapArtefact
 from regrasp_cli.motion.local import distance
 from regrasp_cli.roadmap.query import QueryMemo, shortest_path
-from regrasp_cli.motion.rrt import prune, rrt_connect, shortcut
+from regrasp_cli.motion.rrt import partial_shortcut, prune, rrt_connect, shortcut
 
 
 @dataclass
@@ -163,8 +163,11 @@ def smooth(scratch: Scratch, rng: np.random.Generator, path: np.ndarray, world: 
     dropped: the robot stops at every waypoint, so fewer of them is a shorter motion
     (default suite: median 26.6 s instead of 34.5 s; docs/BENCHMARKS.md)."""
     free = lambda x, y: scratch.segment_free(world, x, y)  # noqa: E731
-    path = shortcut(path, free, lambda x, y: distance(x, y, weights), rng, scratch.options.shortcut_iterations)
-    return prune(path, free) if scratch.options.prune else path
+    o = scratch.options
+    path = shortcut(path, free, lambda x, y: distance(x, y, weights), rng, o.shortcut_iterations)
+    groups = tuple(scratch.problem.robot.groups.values())
+    path = partial_shortcut(path, free, groups, rng, o.partial_shortcuts)
+    return prune(path, free) if o.prune else path
 
 
 def rrt_query(scratch: Scratch, rng: np.random.Generator, a: np.ndarray, b: np.ndarray, worlds: PhaseWorlds, weights: np.ndarray,

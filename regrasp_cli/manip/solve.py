@@ -9,7 +9,11 @@ revalidation and repair (Saut et al. 2010 §V-B, :func:`queries.roadmap_query`),
 single-query RRT-Connect (:func:`queries.rrt_query`) or OMPL's (:func:`ompl_peer.ompl_query`).
 Queries are independent once the key configurations are fixed: each has its own random
 stream, so they give the same paths run in turn or in parallel.  The solved steps become
-phases, timed (stop at every waypoint, :mod:`regrasp_cli.motion.timing`).
+phases, timed without stopping where the corners can be cut (:mod:`regrasp_cli.motion.blend`):
+at each interior corner of a phase a blend is tried and kept when its curve is free, checked
+like the segments it replaces (in the query's certified world when both segments lie on a
+query's path, else in the phase's world without clearance, as the approach and lift lines
+were); a corner whose blend collides is a stop.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from regrasp_cli.manip.modes import Transition
 from regrasp_cli.manip.ompl_peer import ompl_query
 from regrasp_cli.manip.queries import PhaseWorlds, QueryFailed, QueryStats, Roadmap, roadmap_query, rrt_query
 from regrasp_cli.manip.status import PlanningFailed, Stage
-from regrasp_cli.motion.timing import time_parameterise
+from regrasp_cli.motion.blend import BlendedPath, Timing, blended_path, choose_radii, time_optimal
 from regrasp_cli.parallel import ordered_map
 
 
@@ -56,11 +60,15 @@ class Step:
 
 @dataclass(frozen=True)
 class PhaseMotion:
-    """A solved, timed transition: waypoints (k, nq), times (k,) s from the plan start."""
+    """A solved, timed transition: waypoints (k, nq), blend radii (k,) (0: a stop), the
+    time (k,) s from the plan start at which the motion passes each waypoint, and the
+    path speed ``timing`` (grid times from the plan start)."""
 
     transition: Transition
     waypoints: np.ndarray
     times: np.ndarray
+    radii: np.ndarray
+    timing: Timing
 
 
 @dataclass(frozen=True)
@@ -146,24 +154,59 @@ def solve_queries(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarray
     return {r.label: r for r in ordered_map(_query_job, list(range(len(queries))), jobs, job)}
 
 
-def join(pieces: list[np.ndarray]) -> np.ndarray:
-    """Waypoints (k, nq) of consecutive pieces, each repeated configuration once."""
-    rows = [np.asarray(p) for p in pieces]
-    w = [rows[0][0]]
-    for r in rows:
-        for q in r:
-            if not np.array_equal(q, w[-1]):
+def join(pieces: list[np.ndarray], labels: list[str | None] | None = None,
+         tol: float = 1e-9) -> tuple[np.ndarray, list[str | None]]:
+    """Waypoints (k, nq) of consecutive pieces, each repeated configuration once (closer
+    than ``tol`` to the previous one, the last waypoint kept exact), and for each
+    segment (k - 1) the label of the piece it lies on (None for a fixed piece)."""
+    labels = labels or [None] * len(pieces)
+    w, seg = [np.asarray(pieces[0])[0]], []
+    for rows, label in zip(pieces, labels):
+        for q in np.asarray(rows):
+            if np.linalg.norm(q - w[-1]) > tol:
                 w.append(q)
-    return np.array(w)
+                seg.append(label)
+    last = np.asarray(pieces[-1])[-1]
+    if len(w) > 1:
+        w[-1] = last
+    return np.array(w), seg
+
+
+def _corner_checks(seg: list[str | None], curve_free, w: np.ndarray):
+    """blend_free(i, A, C, B) of :func:`motion.blend.choose_radii` for a phase whose
+    segments lie on the pieces ``seg``: ``curve_free(label, A, C, B)`` with the query's
+    label when both segments at corner i lie on its path, else None."""
+    def free(i, A, C, B):
+        label = seg[i - 1] if seg[i - 1] == seg[i] else None
+        return curve_free(label, A, C, B)
+    return free
+
+
+def timed_phase(w: np.ndarray, seg: list[str | None], velocity: np.ndarray, acceleration: np.ndarray,
+                curve_free) -> tuple[np.ndarray, np.ndarray, BlendedPath, Timing]:
+    """(knot times (k,) from 0, radii (k,), path, timing) of waypoints w (k, nq)."""
+    if len(w) == 1:
+        zero = np.zeros(1)
+        return zero, zero, None, Timing(zero, zero, zero)
+    radii = choose_radii(w, _corner_checks(seg, curve_free, w)) if curve_free else np.zeros(len(w))
+    path = blended_path(w, radii)
+    timing = time_optimal(path, velocity, acceleration)
+    return np.interp(path.knots, timing.s, timing.t), radii, path, timing
 
 
 def time_steps(steps: list[Step], paths: dict[str, np.ndarray], velocity: np.ndarray,
-               acceleration: np.ndarray) -> tuple[PhaseMotion, ...]:
-    """The steps with their query labels replaced by the solved paths, timed in turn."""
+               acceleration: np.ndarray, curve_free=None) -> tuple[PhaseMotion, ...]:
+    """The steps with their query labels replaced by the solved paths, timed in turn.
+
+    ``curve_free(step, label, A, C, B)`` says whether the blend A, C, B (nq,) at a corner
+    of ``step`` is collision-free (``label``: the query whose path holds both segments,
+    else None); without it every waypoint is a stop."""
     out, clock = [], 0.0
     for step in steps:
-        w = join([paths[p] if isinstance(p, str) else p for p in step.pieces])
-        times = time_parameterise(w, velocity, acceleration) + clock
-        clock = float(times[-1])
-        out.append(PhaseMotion(step.transition, w, times))
+        pieces = [paths[p] if isinstance(p, str) else p for p in step.pieces]
+        w, seg = join(pieces, [p if isinstance(p, str) else None for p in step.pieces])
+        check = (lambda label, A, C, B, st=step: curve_free(st, label, A, C, B)) if curve_free else None
+        times, radii, _, timing = timed_phase(w, seg, velocity, acceleration, check)
+        out.append(PhaseMotion(step.transition, w, times + clock, radii, timing.shifted(clock)))
+        clock += timing.duration
     return tuple(out)

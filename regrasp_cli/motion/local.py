@@ -26,7 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from regrasp_cli.model.collision import segment_samples
 from regrasp_cli.model.robot import Robot
+from regrasp_cli.motion.blend import bezier_points, bezier_steps
 
 
 def joint_weights(robot: Robot, q_ref: np.ndarray | None = None, floor: float = 0.05) -> np.ndarray:
@@ -108,6 +110,14 @@ class LocalPlanner:
         """Certified check; with ``limit``, only the first (coarsest) ``limit`` samples: a
         cheap test whose False is a proof of collision."""
         return world.segment_free(q0, q1, self.resolution, self.steps(q0, q1, chains), limit)
+
+
+    def blend_free(self, world, A: np.ndarray, C: np.ndarray, B: np.ndarray) -> bool:
+        """Certified check of the blend curve A, C, B (nq,) of :mod:`motion.blend`, sampled
+        by the same bounds as a segment, coarse to fine."""
+        k = bezier_steps(A, C, B, self.reach, self.resolution, 2 * self.margin)
+        u = segment_samples(np.zeros(1), np.ones(1), 1.0, k)
+        return all(world.is_free(q) for q in bezier_points(A, C, B, u))
 
 
 def distance(q0: np.ndarray, q1: np.ndarray, weights: np.ndarray) -> float | np.ndarray:

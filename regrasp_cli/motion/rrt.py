@@ -109,6 +109,42 @@ def prune(path: np.ndarray, segment_free: Callable[[np.ndarray, np.ndarray], boo
     return np.array(out)
 
 
+def partial_shortcut(path: np.ndarray, segment_free: Callable[[np.ndarray, np.ndarray], bool],
+                     groups: tuple[np.ndarray, ...], rng: np.random.Generator, iterations: int = 20) -> np.ndarray:
+    """Partial shortcuts (Geraerts & Overmars 2007): pick two waypoints and one joint group
+    (an index array of ``groups``); between them, move only that group's joints along the
+    straight line joining its values at the two waypoints, at the pace of the original
+    path (its cumulative joint-space length), while the other joints keep their motion.
+    Kept when every new segment is free and the group travels less (L1 over its joints).
+
+    A full shortcut must move every joint at once, so one arm's detour survives whenever
+    the other arm needs its waypoints; roadmap paths (Super Graph nodes sample every joint)
+    are full of such detours: a free arm swinging 2 rad out and back while the other
+    carries the object.  The ends stay fixed.  Returns a new array (k, d), same k.
+    """
+    path = np.array(path, dtype=float)
+    n = len(path)
+    if n < 3 or not groups:
+        return path
+    for _ in range(iterations):
+        i0, i1 = np.sort(rng.choice(n, 2, replace=False))
+        if i1 - i0 < 2:
+            continue
+        g = groups[int(rng.integers(len(groups)))]
+        part = path[i0:i1 + 1]
+        lengths = np.linalg.norm(np.diff(part, axis=0), axis=1)
+        if lengths.sum() <= 0:
+            continue
+        f = np.concatenate([[0.0], np.cumsum(lengths)]) / lengths.sum()
+        new = part.copy()
+        new[:, g] = part[0, g] + f[:, None] * (part[-1, g] - part[0, g])
+        if np.abs(np.diff(new[:, g], axis=0)).sum() >= np.abs(np.diff(part[:, g], axis=0)).sum() - 1e-9:
+            continue
+        if all(segment_free(a, b) for a, b in zip(new[:-1], new[1:])):
+            path[i0:i1 + 1] = new
+    return path
+
+
 def shortcut(path: np.ndarray, segment_free: Callable[[np.ndarray, np.ndarray], bool], distance,
              rng: np.random.Generator, iterations: int = 100) -> np.ndarray:
     """Random shortcuts: pick two points on the path (on its segments, not only at its

@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from regrasp_cli.errors import InputError
-from regrasp_cli.motion.timing import evaluate_trajectory
 from regrasp_cli.show.geometry import (LinkShapes, Soup, link_poses, mesh_shape, obstacle_shapes, robot_links,
                                        robot_soup, shapes_soup)
 from regrasp_cli.manip.modes import Kind
@@ -98,7 +97,7 @@ def load_plan_view(path: str | Path) -> PlanView:
 
 def sample_times(view: PlanView, fps: float) -> np.ndarray:
     """Times (s) at ``fps`` per second from 0 to the plan's end, plus every waypoint time
-    (where the robot stops), sorted and without duplicates."""
+    (where the robot stops or passes a corner), sorted and without duplicates."""
     if not (np.isfinite(fps) and 0 < fps <= MAX_FPS):
         raise ValueError(f"fps must be in (0, {MAX_FPS}], got {fps}")
     T = view.duration
@@ -132,8 +131,7 @@ def sample_motion(view: PlanView, fps: float = 25.0) -> Motion:
         if not len(rows):
             continue
         try:
-            q[rows], _ = evaluate_trajectory(phase.waypoints, phase.times, view.inputs.velocity,
-                                             view.inputs.acceleration, t[rows])
+            q[rows], _ = phase.evaluate(t[rows], view.inputs.velocity, view.inputs.acceleration)
         except ValueError as exc:
             raise InputError(view.file, f"phases[{i}].times", str(exc)) from None
         for r in rows:

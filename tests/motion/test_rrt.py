@@ -105,3 +105,18 @@ def test_prune_of_a_free_zigzag_is_the_straight_line_and_of_two_points_the_same(
     np.testing.assert_array_equal(prune(zigzag, segment), zigzag[[0, -1]])
     two = zigzag[:2]
     np.testing.assert_array_equal(prune(two, segment), two)
+
+
+def test_partial_shortcut_straightens_one_joint_and_keeps_the_other():
+    """Joint 0 detours (0 -> 1 -> 0) while joint 1 climbs: straightening joint 0 alone keeps
+    joint 1's waypoints and removes the detour; a check that refuses x < 0.5 at y = 1
+    keeps it."""
+    from regrasp_cli.motion.rrt import partial_shortcut
+
+    path = np.array([[0.0, 0.0], [1.0, 1.0], [0.0, 2.0]])
+    groups = (np.array([0]), np.array([1]))
+    out = partial_shortcut(path, lambda a, b: True, groups, np.random.default_rng(0), iterations=20)
+    np.testing.assert_allclose(out, [[0.0, 0.0], [0.0, 1.0], [0.0, 2.0]])
+    blocked = partial_shortcut(path, lambda a, b: min(a[0], b[0]) >= 0.5 or max(a[1], b[1]) < 1 or min(a[1], b[1]) > 1,
+                               groups, np.random.default_rng(0), iterations=20)
+    np.testing.assert_array_equal(blocked, path)

@@ -287,11 +287,28 @@ def _keys_and_paths(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarr
             counts["query_checks"] += results[name].checks
         failed = next((n for n in TRANSITIONS if results[n].error is not None), None)
         if failed is None:
-            return dg, ex, steps, {n: results[n].path for n in TRANSITIONS}, table, counts
+            return dg, ex, steps, queries, {n: results[n].path for n in TRANSITIONS}, table, counts
     n = counts["key_attempts"]
     reason = results[failed].error
     raise _Failed(PlanningFailed(Stage.TRANSITION, reason if n == 1 else f"{reason} (the last of {n} double "
                                  "grasps with their exchange tried)", failed), table, counts)
+
+
+def _blend_check(scratch: Scratch, queries: list[Query]):
+    """curve_free(step, label, A, C, B) of :func:`solve.time_steps`: a corner on a query's
+    path in its certified world; another corner (on or beside an approach, lift or retreat
+    line) in the step's world without clearance, as those lines were checked; a step
+    without a query has no corner to cut."""
+    worlds = {q.label: q.worlds.full for q in queries}
+
+    def free(step: Step, label: str | None, A: np.ndarray, C: np.ndarray, B: np.ndarray) -> bool:
+        if label is not None:
+            return scratch.blend_free(worlds[label], A, C, B)
+        own = next((p for p in step.pieces if isinstance(p, str)), None)
+        if own is None:
+            return False
+        return scratch.blend_free(scratch.world(*worlds[own].spec, certified=False), A, C, B)
+    return free
 
 
 class _Failed(Exception):
@@ -330,7 +347,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
             g, doubles, c = choose_hands(scratch, lists, seed)
             counts.update(c)
             t0 = _tick(clock, "double grasps", t0)
-            dg, ex, steps, paths, table, c = _keys_and_paths(scratch, roadmap, weights, seed, lists, g, doubles, clock)
+            dg, ex, steps, queries, paths, table, c = _keys_and_paths(scratch, roadmap, weights, seed, lists, g, doubles, clock)
         except _Failed as exc:  # the failure with the counts of its stage
             if exc.failure.stage == Stage.GRASPS:
                 _tick(clock, "double grasps", t0)
@@ -339,7 +356,8 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
             raise exc.failure from None
         counts.update(c)
         t0 = time.perf_counter()
-        phases = time_steps(steps, paths, problem.robot.velocity, np.full(problem.robot.nq, options.acceleration))
+        phases = time_steps(steps, paths, problem.robot.velocity, np.full(problem.robot.nq, options.acceleration),
+                            _blend_check(scratch, queries) if options.blend else None)
         _tick(clock, "timing", t0)
     except PlanningFailed as exc:
         counts["checks"] = _checks(scratch, counts)
