@@ -67,7 +67,7 @@ class OnlineOptions:
     # like rrt-connect's, and 10 s cut it short on seeds where ours gets its full 3000
     certify: bool = True  # query worlds keep cartesian_step / 2 of clearance (module docstring)
     shortcut_iterations: int = 12
-    partial_shortcuts: int = 20  # then one joint group at a time (motion.rrt.partial_shortcut)
+    partial_shortcuts: int = 30  # checks of one joint group's straight line at a time (motion.rrt.partial_shortcut)
     blend: bool = True  # cut the corners where the curve is free, and time without stopping there (motion.blend)
     prune: bool = True  # then drop the waypoints their neighbours see past: each is a stop of the motion
     acceleration: float = 3.0  # rad/s^2 for every joint (URDFs carry no acceleration limits)
@@ -134,8 +134,9 @@ class Scratch:
             local = self._held[k] = LocalPlanner(self.local.resolution, self.local.margin, reach)
         return local
 
-    def segment_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray) -> bool:
-        return self._local(world).segment_free(world, q0, q1)
+    def segment_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray, limit: int | None = None) -> bool:
+        """Certified check; with ``limit``, only the coarsest samples (False proves a collision)."""
+        return self._local(world).segment_free(world, q0, q1, limit=limit)
 
     def blend_free(self, world: "Placed", A: np.ndarray, C: np.ndarray, B: np.ndarray) -> bool:
         """The blend curve A, C, B of :mod:`motion.blend`, checked like a segment."""

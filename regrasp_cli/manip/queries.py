@@ -166,7 +166,8 @@ def smooth(scratch: Scratch, rng: np.random.Generator, path: np.ndarray, world: 
     o = scratch.options
     path = shortcut(path, free, lambda x, y: distance(x, y, weights), rng, o.shortcut_iterations)
     groups = tuple(scratch.problem.robot.groups.values())
-    path = partial_shortcut(path, free, groups, rng, o.partial_shortcuts)
+    coarse = lambda x, y: scratch.segment_free(world, x, y, limit=3)  # noqa: E731
+    path = partial_shortcut(path, free, groups, o.partial_shortcuts, coarse)
     return prune(path, free) if o.prune else path
 
 

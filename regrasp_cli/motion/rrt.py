@@ -110,12 +110,16 @@ def prune(path: np.ndarray, segment_free: Callable[[np.ndarray, np.ndarray], boo
 
 
 def partial_shortcut(path: np.ndarray, segment_free: Callable[[np.ndarray, np.ndarray], bool],
-                     groups: tuple[np.ndarray, ...], rng: np.random.Generator, iterations: int = 20) -> np.ndarray:
-    """Partial shortcuts (Geraerts & Overmars 2007): pick two waypoints and one joint group
-    (an index array of ``groups``); between them, move only that group's joints along the
-    straight line joining its values at the two waypoints, at the pace of the original
-    path (its cumulative joint-space length), while the other joints keep their motion.
-    Kept when every new segment is free and the group travels less (L1 over its joints).
+                     groups: tuple[np.ndarray, ...], attempts: int = 30,
+                     coarse: Callable[[np.ndarray, np.ndarray], bool] | None = None) -> np.ndarray:
+    """Partial shortcuts (after Geraerts & Overmars 2007): for one joint group (an index
+    array of ``groups``) and a span of waypoints i0 < i1, move only that group's joints
+    along the straight line joining its values at the span's ends, at the pace of the
+    original path (its cumulative joint-space length), while the other joints keep their
+    motion.  Kept when every new segment is free and the group travels less (L1 over its
+    joints).  Spans are tried longest first, per group: the whole path, then its halves,
+    recursively, ``attempts`` checks in all; ``coarse(a, b)``, when given, is a cheap
+    check whose False proves a collision, run over the whole span before the full checks.
 
     A full shortcut must move every joint at once, so one arm's detour survives whenever
     the other arm needs its waypoints; roadmap paths (Super Graph nodes sample every joint)
@@ -123,25 +127,26 @@ def partial_shortcut(path: np.ndarray, segment_free: Callable[[np.ndarray, np.nd
     carries the object.  The ends stay fixed.  Returns a new array (k, d), same k.
     """
     path = np.array(path, dtype=float)
-    n = len(path)
-    if n < 3 or not groups:
-        return path
-    for _ in range(iterations):
-        i0, i1 = np.sort(rng.choice(n, 2, replace=False))
-        if i1 - i0 < 2:
-            continue
-        g = groups[int(rng.integers(len(groups)))]
-        part = path[i0:i1 + 1]
-        lengths = np.linalg.norm(np.diff(part, axis=0), axis=1)
-        if lengths.sum() <= 0:
-            continue
-        f = np.concatenate([[0.0], np.cumsum(lengths)]) / lengths.sum()
-        new = part.copy()
-        new[:, g] = part[0, g] + f[:, None] * (part[-1, g] - part[0, g])
-        if np.abs(np.diff(new[:, g], axis=0)).sum() >= np.abs(np.diff(part[:, g], axis=0)).sum() - 1e-9:
-            continue
-        if all(segment_free(a, b) for a, b in zip(new[:-1], new[1:])):
-            path[i0:i1 + 1] = new
+    for g in groups:
+        spans = [(0, len(path) - 1)]
+        while spans and attempts > 0:
+            i0, i1 = spans.pop(0)
+            if i1 - i0 < 2:
+                continue
+            part = path[i0:i1 + 1]
+            lengths = np.linalg.norm(np.diff(part, axis=0), axis=1)
+            if np.abs(np.diff(part[:, g], axis=0)).sum() <= np.abs(part[-1, g] - part[0, g]).sum() + 1e-9:
+                continue  # the group goes straight already (or only monotonically per joint)
+            f = np.concatenate([[0.0], np.cumsum(lengths)]) / lengths.sum()
+            new = part.copy()
+            new[:, g] = part[0, g] + f[:, None] * (part[-1, g] - part[0, g])
+            attempts -= 1
+            pairs = list(zip(new[:-1], new[1:]))
+            if (coarse is None or all(coarse(a, b) for a, b in pairs)) and all(segment_free(a, b) for a, b in pairs):
+                path[i0:i1 + 1] = new
+            else:
+                m = (i0 + i1) // 2
+                spans += [(i0, m), (m, i1)]
     return path
 
 
