@@ -27,7 +27,8 @@ from regrasp_cli.manip.modes import Transition
 from regrasp_cli.manip.ompl_peer import ompl_query
 from regrasp_cli.manip.queries import PhaseWorlds, QueryFailed, QueryStats, Roadmap, roadmap_query, rrt_query
 from regrasp_cli.manip.status import PlanningFailed, Stage
-from regrasp_cli.motion.blend import BlendedPath, Timing, blended_path, choose_radii, time_optimal
+from regrasp_cli.motion.blend import Timing, blended_path, choose_radii, time_optimal
+from regrasp_cli.motion.timing import time_parameterise
 from regrasp_cli.parallel import ordered_map
 
 
@@ -60,15 +61,16 @@ class Step:
 
 @dataclass(frozen=True)
 class PhaseMotion:
-    """A solved, timed transition: waypoints (k, nq), blend radii (k,) (0: a stop), the
-    time (k,) s from the plan start at which the motion passes each waypoint, and the
-    path speed ``timing`` (grid times from the plan start)."""
+    """A solved, timed transition: waypoints (k, nq), the time (k,) s from the plan start
+    at which the motion passes each waypoint, blend radii (k,) (0: a stop) and the path
+    speed ``timing`` (grid times from the plan start), both None when it stops at every
+    waypoint (trapezoids)."""
 
     transition: Transition
     waypoints: np.ndarray
     times: np.ndarray
-    radii: np.ndarray
-    timing: Timing
+    radii: np.ndarray | None = None
+    timing: Timing | None = None
 
 
 @dataclass(frozen=True)
@@ -183,15 +185,16 @@ def _corner_checks(seg: list[str | None], curve_free, w: np.ndarray):
 
 
 def timed_phase(w: np.ndarray, seg: list[str | None], velocity: np.ndarray, acceleration: np.ndarray,
-                curve_free) -> tuple[np.ndarray, np.ndarray, BlendedPath, Timing]:
-    """(knot times (k,) from 0, radii (k,), path, timing) of waypoints w (k, nq)."""
-    if len(w) == 1:
-        zero = np.zeros(1)
-        return zero, zero, None, Timing(zero, zero, zero)
-    radii = choose_radii(w, _corner_checks(seg, curve_free, w)) if curve_free else np.zeros(len(w))
+                curve_free) -> tuple[np.ndarray, np.ndarray | None, Timing | None]:
+    """(waypoint times (k,) from 0, radii (k,), timing) of waypoints w (k, nq); radii and
+    timing None when the motion stops at every waypoint (no corner, or no blend free):
+    the trapezoids of :mod:`motion.timing` are then exactly time-optimal."""
+    radii = choose_radii(w, _corner_checks(seg, curve_free, w)) if curve_free and len(w) > 2 else None
+    if radii is None or not np.any(radii > 0):
+        return time_parameterise(w, velocity, acceleration), None, None
     path = blended_path(w, radii)
     timing = time_optimal(path, velocity, acceleration)
-    return np.interp(path.knots, timing.s, timing.t), radii, path, timing
+    return np.interp(path.knots, timing.s, timing.t), radii, timing
 
 
 def time_steps(steps: list[Step], paths: dict[str, np.ndarray], velocity: np.ndarray,
@@ -206,7 +209,8 @@ def time_steps(steps: list[Step], paths: dict[str, np.ndarray], velocity: np.nda
         pieces = [paths[p] if isinstance(p, str) else p for p in step.pieces]
         w, seg = join(pieces, [p if isinstance(p, str) else None for p in step.pieces])
         check = (lambda label, A, C, B, st=step: curve_free(st, label, A, C, B)) if curve_free else None
-        times, radii, _, timing = timed_phase(w, seg, velocity, acceleration, check)
-        out.append(PhaseMotion(step.transition, w, times + clock, radii, timing.shifted(clock)))
-        clock += timing.duration
+        times, radii, timing = timed_phase(w, seg, velocity, acceleration, check)
+        out.append(PhaseMotion(step.transition, w, times + clock, radii,
+                               None if timing is None else timing.shifted(clock)))
+        clock = float(times[-1]) + clock
     return tuple(out)

@@ -71,11 +71,15 @@ class BlendedPath:
     def length(self) -> float:
         return float(self.starts[-1])
 
-    def evaluate(self, s, order: int = 0) -> np.ndarray:
+    def evaluate(self, s, order: int = 0, left=None) -> np.ndarray:
         """q (order 0), dq/ds (1) or d2q/ds2 (2) at s (k,) -> (k, d); at a piece end the
-        piece that starts there (the last piece at the path's end)."""
+        piece that starts there (the last piece at the path's end), or the one that ends
+        there where ``left`` (k,) bool says so (a one-sided derivative from below)."""
         s = np.asarray(s, float)
-        k = np.clip(np.searchsorted(self.starts, s, side="right") - 1, 0, len(self.A) - 1)
+        k = np.searchsorted(self.starts, s, side="right") - 1
+        if left is not None:
+            k = np.where(left, np.searchsorted(self.starts, s, side="left") - 1, k)
+        k = np.clip(k, 0, len(self.A) - 1)
         return bezier(self.A[k], self.C[k], self.B[k], self.starts[k + 1] - self.starts[k],
                       (s - self.starts[k]) / (self.starts[k + 1] - self.starts[k]), order)
 
@@ -193,15 +197,17 @@ class Timing:
     def shifted(self, t0: float) -> "Timing":
         return Timing(self.s, self.sd, self.t + t0)
 
-    def at(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """s, sd, sdd (k,) at times t (k,), clamped to [0, duration]."""
+    def at(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """s, sd, sdd (k,) at times t (k,), clamped to the grid's span, and whether s is
+        at the end of its grid interval (k,) bool (reached from below: the path's
+        derivatives there are those of the piece that ends there)."""
         t = np.clip(np.asarray(t, float), self.t[0], self.t[-1])
         i = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 2)
         u = accelerations(self.s, self.sd)[i]
         tau = t - self.t[i]
         s = np.minimum(self.s[i] + self.sd[i] * tau + 0.5 * u * tau * tau, self.s[i + 1])
         s = np.where(t >= self.t[-1], self.s[-1], s)  # the end exactly
-        return s, np.maximum(self.sd[i] + u * tau, 0.0), u
+        return s, np.maximum(self.sd[i] + u * tau, 0.0), u, s >= self.s[i + 1]
 
 
 def accelerations(s: np.ndarray, sd: np.ndarray) -> np.ndarray:
@@ -216,8 +222,8 @@ def grid_times(s: np.ndarray, sd: np.ndarray) -> np.ndarray:
 
 def trajectory(path: BlendedPath, timing: Timing, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions, velocities, accelerations (k, d) at times t (k,)."""
-    s, sd, u = timing.at(t)
-    d1, d2 = path.evaluate(s, 1), path.evaluate(s, 2)
+    s, sd, u, left = timing.at(t)
+    d1, d2 = path.evaluate(s, 1, left), path.evaluate(s, 2, left)
     return path.evaluate(s), d1 * sd[:, None], d2 * (sd * sd)[:, None] + d1 * u[:, None]
 
 

@@ -139,7 +139,7 @@ def partial_shortcut(path: np.ndarray, segment_free: Callable[[np.ndarray, np.nd
                 continue  # the group goes straight already (or only monotonically per joint)
             f = np.concatenate([[0.0], np.cumsum(lengths)]) / lengths.sum()
             new = part.copy()
-            new[:, g] = part[0, g] + f[:, None] * (part[-1, g] - part[0, g])
+            new[1:-1, g] = part[0, g] + f[1:-1, None] * (part[-1, g] - part[0, g])  # the ends exactly
             attempts -= 1
             pairs = list(zip(new[:-1], new[1:]))
             if (coarse is None or all(coarse(a, b) for a, b in pairs)) and all(segment_free(a, b) for a, b in pairs):

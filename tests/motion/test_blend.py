@@ -128,3 +128,16 @@ def test_bezier_samples_keep_the_step():
     per_interval = fine.reshape(k, 20, 2).sum(axis=1)  # how far each joint travels per interval
     assert per_interval.max() <= 0.01 + 1e-12
     assert (per_interval @ reach).max() <= 0.005 + 1e-12
+
+
+def test_just_before_a_stop_the_motion_decelerates_along_the_incoming_segment():
+    """At a corner without a blend, the one-sided acceleration from below belongs to the
+    segment that ends there (along x), not to the one that starts there (along y): the
+    grid point's time itself and the time just before it differ."""
+    path = blended_path(CORNER, [0.0, 0.0, 0.0])
+    timing = time_optimal(path, V, A)
+    t1 = float(np.interp(1.0, timing.s, timing.t))
+    _, _, before = trajectory(path, timing, np.array([np.nextafter(t1, -np.inf)]))
+    _, _, after = trajectory(path, timing, np.array([t1]))
+    assert before[0, 0] < 0 and before[0, 1] == 0  # braking along +x
+    assert after[0, 0] == 0 and after[0, 1] > 0  # accelerating along +y

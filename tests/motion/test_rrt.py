@@ -117,6 +117,10 @@ def test_partial_shortcut_straightens_one_joint_and_keeps_the_other():
     groups = (np.array([0]), np.array([1]))
     out = partial_shortcut(path, lambda a, b: True, groups)
     np.testing.assert_allclose(out, [[0.0, 0.0], [0.0, 1.0], [0.0, 2.0]])
+    # the ends exactly, bit for bit, also where a + (b - a) != b in floating point
+    odd = np.array([[0.1, 0.0], [0.9, 1.0], [-0.45, 2.0]])  # 0.1 + (-0.45 - 0.1) != -0.45
+    out = partial_shortcut(odd, lambda a, b: True, groups)
+    assert out[0].tobytes() == odd[0].tobytes() and out[-1].tobytes() == odd[-1].tobytes()
     blocked = partial_shortcut(path, lambda a, b: min(a[0], b[0]) >= 0.5 or max(a[1], b[1]) < 1 or min(a[1], b[1]) > 1,
                                groups)
     np.testing.assert_array_equal(blocked, path)
