@@ -66,7 +66,7 @@ class OnlineOptions:
     ompl_time: float = 60.0  # s: wall-clock guard of an ompl-rrtconnect query; its budget is rrt.max_iterations,
     # like rrt-connect's, and 10 s cut it short on seeds where ours gets its full 3000
     certify: bool = True  # query worlds keep cartesian_step / 2 of clearance (module docstring)
-    shortcut_iterations: int = 24
+    shortcut_iterations: int = 36
     partial_shortcuts: int = 30  # checks of one joint group's straight line at a time (motion.rrt.partial_shortcut)
     blend: bool = True  # cut the corners where the curve is free, and time without stopping there (motion.blend)
     prune: bool = True  # then drop the waypoints their neighbours see past: each is a stop of the motion

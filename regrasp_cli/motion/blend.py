@@ -145,7 +145,7 @@ def blended_path(waypoints, radii) -> BlendedPath:
 
 
 def choose_radii(waypoints, blend_free: Callable[[int, np.ndarray, np.ndarray, np.ndarray], bool],
-                 fraction: float = 0.4, shrink: float = 0.25, tries: int = 2) -> np.ndarray:
+                 fraction: float = 0.5, shrink: float = 0.25, tries: int = 2) -> np.ndarray:
     """Blend radii (n,): at each interior waypoint i, ``fraction`` of its shorter segment,
     shrunk by ``shrink`` while ``blend_free(i, A, C, B)`` says the curve collides, at most
     ``tries`` times, then 0 (a stop).  ``fraction`` <= 0.5 lets every blend fit."""
