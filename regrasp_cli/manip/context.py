@@ -30,7 +30,7 @@ from regrasp_cli.model.ik import IKOptions
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.manip.handshape import palm_and_finger_links
 from regrasp_cli.roadmap.compose import margin_rule
-from regrasp_cli.motion.local import LocalPlanner, held_reach, joint_reach
+from regrasp_cli.motion.local import LocalPlanner, arm_chains, held_reach, joint_reach
 from regrasp_cli.motion.rrt import RRTOptions
 from regrasp_cli.scene import Problem
 
@@ -89,6 +89,7 @@ class Scratch:
         self._held: dict = {}  # local planners for a held object, by hand and placement
         self.local = LocalPlanner(self.options.resolution, self.options.cartesian_step / 2,
                                   joint_reach(self.problem.robot))
+        self.chains = arm_chains(self.problem.robot)  # the displacement bound per class of pairs
 
     def world(self, X_PO: np.ndarray | None, attached: str | None = None, touching: tuple[str, ...] = (),
               pair_filter=None, key: str = "", certified: bool = False) -> "Placed":
@@ -136,11 +137,11 @@ class Scratch:
 
     def segment_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray, limit: int | None = None) -> bool:
         """Certified check; with ``limit``, only the coarsest samples (False proves a collision)."""
-        return self._local(world).segment_free(world, q0, q1, limit=limit)
+        return self._local(world).segment_free(world, q0, q1, self.chains, limit)
 
     def blend_free(self, world: "Placed", A: np.ndarray, C: np.ndarray, B: np.ndarray) -> bool:
         """The blend curve A, C, B of :mod:`motion.blend`, checked like a segment."""
-        return self._local(world).blend_free(world, A, C, B)
+        return self._local(world).blend_free(world, A, C, B, self.chains)
 
     def path_free(self, world: CollisionWorld, path: np.ndarray) -> bool:
         return all(self.segment_free(world, a, b) for a, b in zip(path[:-1], path[1:]))

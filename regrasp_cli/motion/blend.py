@@ -162,14 +162,18 @@ def choose_radii(waypoints, blend_free: Callable[[int, np.ndarray, np.ndarray, n
     return r
 
 
-def bezier_steps(A, C, B, reach: np.ndarray, resolution: float, step: float) -> int:
+def bezier_steps(A, C, B, reach: np.ndarray, resolution: float, step: float,
+                 chains: tuple[np.ndarray, ...] | None = None) -> int:
     """Intervals k cutting the curve A, C, B (d,) at evenly spaced u so that between two
     samples no joint moves more than ``resolution`` and no point of the robot more than
     ``step`` (m; ``reach`` (d,) m/rad bounds how far a point moves per radian of each
     joint, :func:`motion.local.joint_reach`): a joint's speed
-    ``|dq/du| <= 2 max(|C - A|, |B - C|)`` bounds its move over an interval."""
+    ``|dq/du| <= 2 max(|C - A|, |B - C|)`` bounds its move over an interval; ``chains``
+    as in :meth:`motion.local.LocalPlanner.steps`."""
     V = 2 * np.maximum(np.abs(C - A), np.abs(B - C))
-    return max(1, int(np.ceil(V.max() / resolution)), int(np.ceil(float(reach @ V) / step)))
+    w = reach * V
+    cart = w.sum() if chains is None else max(float(w[c].sum()) for c in chains)
+    return max(1, int(np.ceil(V.max() / resolution)), int(np.ceil(cart / step)))
 
 
 def bezier_points(A, C, B, u) -> np.ndarray:

@@ -83,6 +83,25 @@ def held_reach(robot: Robot, reach: np.ndarray, hand: str, vertices_O: np.ndarra
     return reach + float(np.linalg.norm(X_JG[:3, 3])) + radius
 
 
+def arm_chains(robot: Robot) -> tuple[np.ndarray, ...] | None:
+    """Joint sets for :meth:`LocalPlanner.steps` in a world that checks every pair: a pair
+    moves relative to itself through the torso and one side (that arm, its hand and what
+    it holds), or through both sides (one against the other: both hang from one joint),
+    never through all three; joints of no group or hand are in every set.  None (the sum
+    over every joint) when the arms do not hang from the same joint."""
+    model = robot.model
+    parents = {model.parents[model.getJointId(robot.joint_names[robot.groups[f"{s}_arm"][0]])]
+               for s in ("right", "left")}
+    if len(parents) != 1:
+        return None
+    side = {s: np.r_[robot.groups[f"{s}_arm"], robot.hands[s].idx if s in robot.hands else []].astype(int)
+            for s in ("right", "left")}
+    torso = robot.groups["torso"]
+    others = np.setdiff1d(np.arange(robot.nq), np.r_[torso, side["right"], side["left"]])
+    return (np.r_[torso, side["right"], others], np.r_[torso, side["left"], others],
+            np.r_[side["right"], side["left"], others])
+
+
 @dataclass(frozen=True)
 class LocalPlanner:
     """Certified straight-line local planner (see the module docstring)."""
@@ -112,10 +131,11 @@ class LocalPlanner:
         return world.segment_free(q0, q1, self.resolution, self.steps(q0, q1, chains), limit)
 
 
-    def blend_free(self, world, A: np.ndarray, C: np.ndarray, B: np.ndarray) -> bool:
+    def blend_free(self, world, A: np.ndarray, C: np.ndarray, B: np.ndarray,
+                   chains: tuple[np.ndarray, ...] | None = None) -> bool:
         """Certified check of the blend curve A, C, B (nq,) of :mod:`motion.blend`, sampled
         by the same bounds as a segment, coarse to fine."""
-        k = bezier_steps(A, C, B, self.reach, self.resolution, 2 * self.margin)
+        k = bezier_steps(A, C, B, self.reach, self.resolution, 2 * self.margin, chains)
         u = segment_samples(np.zeros(1), np.ones(1), 1.0, k)
         return all(world.is_free(q) for q in bezier_points(A, C, B, u))
 

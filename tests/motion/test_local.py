@@ -151,3 +151,26 @@ def test_checked_configurations_are_at_most_two_margins_apart_in_cartesian_space
         # the joint bound holds too
         assert np.max(np.abs(np.diff(ts)[:, None] * (q1 - q0)[None, :])) <= resolution + 1e-12
     assert 0.0 < largest <= 2 * margin, largest
+
+
+def test_arm_chains_of_the_humanoid_and_what_they_save(robot):
+    """Torso + one side (arm and hand), and both sides without the torso: every joint in
+    some set, the torso never with both arms.  A segment that moves the torso and both
+    arms gets fewer samples than with the sum over every joint, one that moves one arm
+    only the same number."""
+    from regrasp_cli.motion.local import arm_chains
+
+    chains = arm_chains(robot)
+    t, r, l = robot.groups["torso"], robot.groups["right_arm"], robot.groups["left_arm"]
+    sets = [set(c.tolist()) for c in chains]
+    assert sets[0] == set(t) | set(r) | set(robot.hands["right"].idx)
+    assert sets[1] == set(t) | set(l) | set(robot.hands["left"].idx)
+    assert sets[2] == set(r) | set(l) | set(robot.hands["right"].idx) | set(robot.hands["left"].idx)
+    assert set().union(*sets) == set(range(robot.nq))
+    planner = LocalPlanner(0.02, 0.005, joint_reach(robot))
+    dq = np.zeros(robot.nq)
+    dq[np.r_[t, r, l]] = 0.3
+    assert planner.steps(np.zeros(robot.nq), dq, chains) < planner.steps(np.zeros(robot.nq), dq)
+    one = np.zeros(robot.nq)
+    one[r] = 0.3
+    assert planner.steps(np.zeros(robot.nq), one, chains) == planner.steps(np.zeros(robot.nq), one)
