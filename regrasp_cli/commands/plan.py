@@ -41,7 +41,7 @@ def print_summary(plan: Plan, outcome: Outcome, console: Console) -> None:
         t.add_row(q, str(s.nodes), f"{s.planning_s:.2f}", str(s.invalid_edges), f"{s.validation_s:.2f}",
                   f"{s.planning_s + s.validation_s:.2f}")
     console.print(t)
-    stages = ", ".join(f"{k} {v:.2f} s" for k, v in outcome.stages.items() if k != "timing")
+    stages = ", ".join(f"{k} {v:.2f} s" for k, v in outcome.stages.items())
     kinds = " ".join(p.kind.value for p in plan.phases)
     console.print(f"{stages}: total {outcome.planning_s:.2f} s; motion of {plan.duration:.1f} s in "
                   f"{sum(len(p.waypoints) for p in plan.phases)} waypoints over {len(plan.phases)} phases "
