@@ -1,0 +1,58 @@
+"""Timing a solved mode path (regrasp_cli.manip.solve.time_steps) on a small 2-joint
+case: blends where the curve check allows, stops where it does not, phases joined in
+time, each phase starting where the previous one ended."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from regrasp_cli.manip.modes import Kind, Transition
+from regrasp_cli.manip.solve import Step, join, time_steps
+from regrasp_cli.motion.blend import trajectory, blended_path
+from regrasp_cli.motion.timing import time_parameterise
+
+V, A = np.array([1.0, 1.0]), np.array([2.0, 2.0])
+LINE = np.array([[0.0, 0.0], [0.2, 0.0], [0.4, 0.05]])  # a fixed piece (an approach line)
+PATH = np.array([[0.4, 0.05], [1.0, 1.0], [0.2, 1.5], [0.0, 2.0]])  # a query's path
+
+
+def _steps():
+    tr = Transition(Kind.TRANSIT, "transit", {}, (), "start")
+    return [Step(tr, (LINE, "q")), Step(tr, (PATH[-1:], np.array([[0.0, 2.5]])))]
+
+
+def test_join_labels_each_segment_with_its_piece():
+    w, seg = join([LINE, PATH], [None, "q"])
+    np.testing.assert_array_equal(w, np.vstack([LINE, PATH[1:]]))
+    assert seg == [None, None, "q", "q", "q"]
+
+
+def test_blends_where_free_and_stops_where_not():
+    asked = []
+
+    def free(step, label, A_, C, B):
+        asked.append(label)
+        return label == "q"  # corners on the line (or beside it) collide
+
+    phases = time_steps(_steps(), {"q": PATH}, V, A, free)
+    first, second = phases
+    # corners 1 and 2 touch the line (label None): stops; 3 and 4 lie on the query's path
+    assert asked.count(None) == 2 * 2 and asked.count("q") == 2
+    np.testing.assert_array_equal(first.radii > 0, [False, False, False, True, True, False])
+    # the motion passes each stop exactly and at rest
+    path = blended_path(first.waypoints, first.radii)
+    q, qd, _ = trajectory(path, first.timing, first.times[:3])
+    np.testing.assert_allclose(q, first.waypoints[:3], atol=1e-12)
+    np.testing.assert_allclose(qd, 0.0, atol=1e-12)
+    # a two-waypoint phase keeps the trapezoid, and starts when the first one ends
+    assert second.timing is None and second.radii is None
+    np.testing.assert_allclose(second.times, first.times[-1] + time_parameterise(second.waypoints, V, A))
+
+
+def test_without_any_free_blend_every_waypoint_is_a_stop():
+    phases = time_steps(_steps(), {"q": PATH}, V, A, lambda *_: False)
+    w = phases[0].waypoints
+    assert phases[0].timing is None
+    np.testing.assert_allclose(phases[0].times, time_parameterise(w, V, A))
+    blended = time_steps(_steps(), {"q": PATH}, V, A, lambda *_: True)
+    assert blended[0].times[-1] < phases[0].times[-1]
