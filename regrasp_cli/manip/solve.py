@@ -174,7 +174,7 @@ def join(pieces: list[np.ndarray], labels: list[str | None] | None = None,
     return np.array(w), seg
 
 
-def _corner_checks(seg: list[str | None], curve_free, w: np.ndarray):
+def _corner_checks(seg: list[str | None], curve_free):
     """blend_free(i, A, C, B) of :func:`motion.blend.choose_radii` for a phase whose
     segments lie on the pieces ``seg``: ``curve_free(label, A, C, B)`` with the query's
     label when both segments at corner i lie on its path, else None."""
@@ -189,7 +189,7 @@ def timed_phase(w: np.ndarray, seg: list[str | None], velocity: np.ndarray, acce
     """(waypoint times (k,) from 0, radii (k,), timing) of waypoints w (k, nq); radii and
     timing None when the motion stops at every waypoint (no corner, or no blend free):
     the trapezoids of :mod:`motion.timing` are then exactly time-optimal."""
-    radii = choose_radii(w, _corner_checks(seg, curve_free, w)) if curve_free and len(w) > 2 else None
+    radii = choose_radii(w, _corner_checks(seg, curve_free)) if curve_free and len(w) > 2 else None
     if radii is None or not np.any(radii > 0):
         return time_parameterise(w, velocity, acceleration), None, None
     path = blended_path(w, radii)
