@@ -66,6 +66,8 @@ class OnlineOptions:
     ompl_time: float = 60.0  # s: wall-clock guard of an ompl-rrtconnect query; its budget is rrt.max_iterations,
     # like rrt-connect's, and 10 s cut it short on seeds where ours gets its full 3000
     certify: bool = True  # query worlds keep cartesian_step / 2 of clearance (module docstring)
+    coarse_checks: int = 4  # certified checks step this many times farther where the clearance allows
+    # (motion.local.tiered_free): same certificate, fewer checks
     shortcut_iterations: int = 36
     partial_shortcuts: int = 30  # checks of one joint group's straight line at a time (motion.rrt.partial_shortcut)
     blend: bool = True  # cut the corners where the curve is free, and time without stopping there (motion.blend)
@@ -88,7 +90,7 @@ class Scratch:
         self.kin = Kinematics(self.problem.robot)
         self._held: dict = {}  # local planners for a held object, by hand and placement
         self.local = LocalPlanner(self.options.resolution, self.options.cartesian_step / 2,
-                                  joint_reach(self.problem.robot))
+                                  joint_reach(self.problem.robot), self.options.coarse_checks)
         self.chains = arm_chains(self.problem.robot)  # the displacement bound per class of pairs
 
     def world(self, X_PO: np.ndarray | None, attached: str | None = None, touching: tuple[str, ...] = (),
@@ -132,7 +134,7 @@ class Scratch:
         if local is None:
             reach = held_reach(self.problem.robot, self.local.reach, obj.attached_to,
                                np.asarray(self.problem.object.mesh.vertices), world.X_PO)
-            local = self._held[k] = LocalPlanner(self.local.resolution, self.local.margin, reach)
+            local = self._held[k] = LocalPlanner(self.local.resolution, self.local.margin, reach, self.local.coarse)
         return local
 
     def segment_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray, limit: int | None = None) -> bool:
@@ -166,8 +168,12 @@ class Placed:
             w.set_object_pose(self.X_PO)
         return w
 
-    def is_free(self, q: np.ndarray) -> bool:
-        return self._place().is_free(q)
+    def is_free(self, q: np.ndarray, scale: float = 1.0) -> bool:
+        return self._place().is_free(q, scale)
+
+    @property
+    def certified(self) -> bool:
+        return self.world.certified
 
     def colliding_pairs(self, q: np.ndarray) -> list[tuple[str, str]]:
         return self._place().colliding_pairs(q)

@@ -265,15 +265,20 @@ class CollisionWorld:
         # the object's pose lives in the geometry model (pinocchio reads placements there):
         # a world that moves the object moves it in its own copy, never in the shared model
         self.geometry_model = model.geometry_model.copy() if model.object_geom is not None else model.geometry_model
-        self.geometry_data = self.geometry_model.createData()
-        cold_start(self.geometry_data)
-        for k in np.flatnonzero(model.margins):
-            self.geometry_data.collisionRequests[int(k)].security_margin = float(model.margins[k])
         self.data = model.robot.model.createData()
-        self.manager = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
-            model.robot.model, self.geometry_model, self.geometry_data)
+        self.geometry_data, self.manager = self._checker(1.0)
+        self._scaled = {1.0: (self.geometry_data, self.manager)}  # margin scale -> its checker
         self.X_PO = None if model.object is None else model.object.X_PO
         self.n_checks = 0
+
+    def _checker(self, scale: float) -> tuple[pin.GeometryData, pin.BroadPhaseManager_DynamicAABBTreeCollisionManager]:
+        """Geometry data keeping ``scale`` times the model's margins, and its broadphase."""
+        gd = self.geometry_model.createData()
+        cold_start(gd)
+        for k in np.flatnonzero(self.model.margins):
+            gd.collisionRequests[int(k)].security_margin = scale * float(self.model.margins[k])
+        return gd, pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(self.model.robot.model,
+                                                                          self.geometry_model, gd)
 
     # the model's description, for callers that hold only a world
     robot = property(lambda self: self.model.robot)
@@ -299,10 +304,19 @@ class CollisionWorld:
 
     # ------------------------------------------------------------------ checks
 
-    def is_free(self, q: np.ndarray) -> bool:
-        """True when the configuration (nq,) is collision-free (early exit)."""
+    @property
+    def certified(self) -> bool:
+        """True when some pair keeps a clearance (a margin) at the checked configurations."""
+        return bool(self.model.margins.any())
+
+    def is_free(self, q: np.ndarray, scale: float = 1.0) -> bool:
+        """True when the configuration (nq,) is collision-free (early exit), every pair
+        keeping ``scale`` times its margin (a larger clearance certifies a longer step)."""
         self.n_checks += 1
-        return not pin.computeCollisions(self.robot.model, self.data, self.manager, self.robot.to_pin(q), True)
+        checker = self._scaled.get(scale)
+        if checker is None:  # the data is kept with its manager: the manager points into it
+            checker = self._scaled[scale] = self._checker(scale)
+        return not pin.computeCollisions(self.robot.model, self.data, checker[1], self.robot.to_pin(q), True)
 
     def colliding_pairs(self, q: np.ndarray) -> list[tuple[str, str]]:
         """All colliding pairs (link or obstacle names) at q: for reports, not the hot path."""

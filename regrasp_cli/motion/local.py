@@ -6,7 +6,11 @@ of any joint between two checked configurations) *and* by at most ``2 * margin``
 Cartesian displacement of any point of the robot, with every pair whose relative pose
 changes along the segment kept ``margin`` apart (a coal security margin).  Every point of
 the path is then within ``margin`` of a checked configuration, so the whole segment is
-collision-free, not only the samples: a check at any finer resolution agrees.  (A plain
+collision-free, not only the samples: a check at any finer resolution agrees.  In a world
+that keeps clearances, a certified check first steps ``coarse`` times farther with
+``coarse`` times the clearance, and checks at the fine step only around the coarse samples
+that lack the larger clearance (:func:`tiered_free`): the same certificate, with a
+fraction of the checks where the path keeps away from everything.  (A plain
 joint-step check at 0.03 rad let 1.3 % of the Super Graph edges through that a check at
 0.015 rad found colliding.)  The displacement bound is ``sum_j reach_j |dq_j|``, with
 ``reach_j`` an upper bound of the distance from joint j to any point it carries (the sum
@@ -109,6 +113,7 @@ class LocalPlanner:
     resolution: float  # rad (or m): largest joint step between two checked configurations
     margin: float  # m: clearance kept by every pair that moves; half the Cartesian step
     reach: np.ndarray  # (nq,) from :func:`joint_reach`
+    coarse: int = 1  # > 1: tiered checks in worlds that keep clearances (:func:`tiered_free`)
 
     def steps(self, q0: np.ndarray, q1: np.ndarray, chains: tuple[np.ndarray, ...] | None = None) -> int:
         """Number of intervals the segment is cut into.
@@ -128,16 +133,45 @@ class LocalPlanner:
                      chains: tuple[np.ndarray, ...] | None = None, limit: int | None = None) -> bool:
         """Certified check; with ``limit``, only the first (coarsest) ``limit`` samples: a
         cheap test whose False is a proof of collision."""
-        return world.segment_free(q0, q1, self.resolution, self.steps(q0, q1, chains), limit)
-
+        n = self.steps(q0, q1, chains)
+        if limit is None and self.coarse > 1 and world.certified:
+            return tiered_free(world, lambda u: q0 + u[:, None] * (q1 - q0), n, self.coarse)
+        return world.segment_free(q0, q1, self.resolution, n, limit)
 
     def blend_free(self, world, A: np.ndarray, C: np.ndarray, B: np.ndarray,
                    chains: tuple[np.ndarray, ...] | None = None) -> bool:
         """Certified check of the blend curve A, C, B (nq,) of :mod:`motion.blend`, sampled
         by the same bounds as a segment, coarse to fine."""
         k = bezier_steps(A, C, B, self.reach, self.resolution, 2 * self.margin, chains)
+        if self.coarse > 1 and world.certified:
+            return tiered_free(world, lambda u: bezier_points(A, C, B, u), k, self.coarse)
         u = segment_samples(np.zeros(1), np.ones(1), 1.0, k)
         return all(world.is_free(q) for q in bezier_points(A, C, B, u))
+
+
+def tiered_free(world, points, n: int, coarse: int) -> bool:
+    """Certified check of a curve cut into ``n`` intervals that each keep within the
+    clearance bound (``points(u)``: configurations (k, nq) at parameters u (k,) in [0, 1]).
+
+    The curve is first cut into m = ceil(n / coarse) intervals, each at most ``coarse``
+    fine ones long, and their ends are checked keeping ``coarse`` times the world's
+    clearance: an interval whose two ends keep it is free.  A coarse end that lacks it is
+    checked at the plain clearance (a collision there ends the check) and the intervals on
+    both sides of it are checked at the fine step, m * coarse >= n intervals in all.
+    Coarse samples run coarse to fine, so a colliding curve is usually refused early."""
+    m = -(-n // coarse)
+    u = segment_samples(np.zeros(1), np.ones(1), 1.0, m)
+    near = []
+    for i, q in zip(np.rint(u * m).astype(int), points(u)):
+        if not world.is_free(q, float(coarse)):
+            if not world.is_free(q):
+                return False
+            near.append(int(i))
+    if not near:
+        return True
+    fine = np.unique(np.concatenate([np.arange(max(i - 1, 0) * coarse, min(i + 1, m) * coarse + 1) for i in near]))
+    fine = np.setdiff1d(fine, np.asarray(near) * coarse)  # checked already
+    return all(world.is_free(q) for q in points(fine / (m * coarse)))
 
 
 def distance(q0: np.ndarray, q1: np.ndarray, weights: np.ndarray) -> float | np.ndarray:

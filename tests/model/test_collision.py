@@ -436,3 +436,24 @@ def test_worlds_on_one_model_move_their_object_apart(problem):
     assert other.X_PO is X_down and world.X_PO is X_GO
     after = model.geometry_model.geometryObjects[model.object_geom].placement.homogeneous
     np.testing.assert_array_equal(before, after)
+
+
+def test_a_scaled_check_keeps_that_many_margins(problem):
+    """A ball moved away from a fingertip in 1 mm steps: it stops colliding 3 margins
+    later when the check keeps 4 margins of clearance than when it keeps 1."""
+    from regrasp_cli.roadmap.compose import margin_rule
+
+    robot = problem.robot
+    p = Kinematics(robot).fk(robot.q_rest, robot.hands["right"].tip_frames[1])[:3, 3]
+    links, margin = problem.disabled.links(), 0.005
+
+    def first_free(scale: float) -> float:
+        for dz in np.arange(0.0, 0.2, 0.001):
+            w = collision_world(robot, [_ball("ball", 0.01, p - [0.0, 0.0, dz])], links,
+                                margin=margin_rule(robot, margin))
+            assert w.certified
+            if w.is_free(robot.q_rest, scale):
+                return dz
+        raise AssertionError("never free")
+
+    assert first_free(4.0) - first_free(1.0) == pytest.approx(3 * margin, abs=0.0015)

@@ -174,3 +174,97 @@ def test_arm_chains_of_the_humanoid_and_what_they_save(robot):
     one = np.zeros(robot.nq)
     one[r] = 0.3
     assert planner.steps(np.zeros(robot.nq), one, chains) == planner.steps(np.zeros(robot.nq), one)
+
+
+# --------------------------------------------------------------------------- tiered checks
+
+
+class _LineWorld:
+    """1-D joint space, reach 1: an obstacle occupies [lo, hi]; a configuration is free
+    with clearance ``scale * margin`` when it is that far from the interval."""
+
+    def __init__(self, lo: float, hi: float, margin: float, certified: bool = True):
+        self.lo, self.hi, self.margin, self.certified = lo, hi, margin, certified
+        self.calls = []
+
+    def gap(self, q) -> float:
+        x = float(q[0])
+        return max(self.lo - x, x - self.hi, 0.0)
+
+    def is_free(self, q, scale: float = 1.0) -> bool:
+        self.calls.append((float(q[0]), scale))
+        return self.gap(q) > scale * self.margin
+
+    def segment_free(self, q0, q1, resolution, min_steps=1, limit=None):
+        ts = segment_samples(q0, q1, resolution, min_steps)[:limit]
+        return all(self.is_free(q0 + t * (q1 - q0)) for t in ts)
+
+
+def test_tiered_check_far_from_everything_costs_a_quarter():
+    # 1 m at a 2 cm step: 50 fine intervals; 13 coarse ones of 4 -> 14 checks, all at 4x
+    p = LocalPlanner(resolution=1.0, margin=0.01, reach=np.array([1.0]), coarse=4)
+    world = _LineWorld(5.0, 6.0, 0.01)
+    assert p.steps(np.zeros(1), np.ones(1)) == 50
+    assert p.segment_free(world, np.zeros(1), np.ones(1)) is True
+    assert len(world.calls) == 14 and {s for _, s in world.calls} == {4.0}
+
+
+def test_tiered_check_refines_only_near_the_obstacle():
+    # obstacle 3 cm past the segment's end: the last coarse ends lack 4 cm of clearance,
+    # the fine samples around them keep 1 cm
+    p = LocalPlanner(resolution=1.0, margin=0.01, reach=np.array([1.0]), coarse=4)
+    world = _LineWorld(1.03, 2.0, 0.01)
+    assert p.segment_free(world, np.zeros(1), np.ones(1)) is True
+    fine = [x for x, s in world.calls if s == 1.0]
+    assert fine and min(fine) > 0.8  # only the last coarse intervals were refined
+    assert len(world.calls) < 30  # instead of 51 fine checks
+
+
+def test_tiered_check_is_a_certificate_and_keeps_what_the_plain_check_accepts():
+    """On random segments and obstacles: True only when the segment misses the obstacle;
+    True whenever the segment keeps the plain clearance everywhere (what a fine check
+    needs), never False without a sample inside the plain clearance."""
+    rng = np.random.default_rng(3)
+    for coarse in (2, 3, 4, 7):
+        p = LocalPlanner(resolution=1.0, margin=0.01, reach=np.array([1.0]), coarse=coarse)
+        for _ in range(300):
+            a, b = rng.uniform(-1, 1, 2)
+            lo = rng.uniform(-1.2, 1.2)
+            world = _LineWorld(lo, lo + rng.uniform(0.0, 0.05), 0.01)
+            q0, q1 = np.array([a]), np.array([b])
+            ok = p.segment_free(world, q0, q1)
+            hits = not (max(a, b) < world.lo or min(a, b) > world.hi)
+            clearance = 0.0 if hits else min(world.gap(q0), world.gap(q1))
+            if ok:
+                assert not hits
+            if clearance > 0.01:
+                assert ok
+            if not ok:
+                assert any(s == 1.0 and world.gap([x]) <= 0.01 for x, s in world.calls)
+
+
+def test_tiered_check_only_where_clearances_are_kept():
+    # a world without clearances (an approach line's) is sampled at the fine step, and
+    # a cheap test (limit) stays the plain one
+    p = LocalPlanner(resolution=1.0, margin=0.01, reach=np.array([1.0]), coarse=4)
+    world = _LineWorld(5.0, 6.0, 0.01, certified=False)
+    assert p.segment_free(world, np.zeros(1), np.ones(1)) is True
+    assert len(world.calls) == 51 and {s for _, s in world.calls} == {1.0}
+    world = _LineWorld(5.0, 6.0, 0.01)
+    assert p.segment_free(world, np.zeros(1), np.ones(1), limit=3) is True
+    assert len(world.calls) == 3 and {s for _, s in world.calls} == {1.0}
+
+
+def test_tiered_blend_check_is_a_certificate():
+    # a blend curve cutting into the disc (its midpoint is 0.18 from the centre) is
+    # refused, one around it accepted
+    p = LocalPlanner(resolution=1.0, margin=0.01, reach=np.array([1.0, 1.0]), coarse=4)
+
+    class Disc(_LineWorld):
+        def gap(self, q):
+            return max(float(np.linalg.norm(np.asarray(q) - [0.5, 0.5])) - 0.2, 0.0)  # a disc of radius 0.2
+
+    A, C, B = np.array([0.0, 0.5]), np.array([0.5, 0.5]), np.array([0.5, 1.0])
+    assert p.blend_free(Disc(0, 0, 0.01), A, C, B) is False
+    A2, C2, B2 = np.array([0.0, 0.8]), np.array([0.2, 0.8]), np.array([0.2, 1.0])
+    assert p.blend_free(Disc(0, 0, 0.01), A2, C2, B2) is True
