@@ -70,6 +70,7 @@ class OnlineOptions:
     # (motion.local.tiered_free): same certificate, fewer checks
     shortcut_iterations: int = 36
     partial_shortcuts: int = 30  # checks of one joint group's straight line at a time (motion.rrt.partial_shortcut)
+    final_shortcuts: int = 24  # random shortcuts after the partial ones
     blend: bool = True  # cut the corners where the curve is free, and time without stopping there (motion.blend)
     prune: bool = True  # then drop the waypoints their neighbours see past: each is a stop of the motion
     acceleration: float = 3.0  # rad/s^2 for every joint (URDFs carry no acceleration limits)

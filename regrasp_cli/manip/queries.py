@@ -160,15 +160,17 @@ def _escape(scratch: Scratch, rng: np.random.Generator, rm: Roadmap, q: np.ndarr
 
 def smooth(scratch: Scratch, rng: np.random.Generator, path: np.ndarray, world: Placed, weights: np.ndarray) -> np.ndarray:
     """Random shortcuts, then partial shortcuts one joint group at a time (the detours of
-    one arm while the other needs its waypoints), then (``options.prune``) the waypoints
-    their neighbours see past dropped: fewer, straighter corners to blend and time
-    (default suite: median motion 17.4 s instead of 34.5 s; docs/BENCHMARKS.md)."""
+    one arm while the other needs its waypoints), random shortcuts again (the partial ones
+    open new straight lines), then (``options.prune``) the waypoints their neighbours see
+    past dropped: fewer, straighter corners to blend and time (default suite: median
+    motion 16.9 s instead of 34.5 s; docs/BENCHMARKS.md)."""
     free = lambda x, y: scratch.segment_free(world, x, y)  # noqa: E731
     o = scratch.options
     path = shortcut(path, free, lambda x, y: distance(x, y, weights), rng, o.shortcut_iterations)
     groups = tuple(scratch.problem.robot.groups.values())
     coarse = lambda x, y: scratch.segment_free(world, x, y, limit=3)  # noqa: E731
     path = partial_shortcut(path, free, groups, o.partial_shortcuts, coarse)
+    path = shortcut(path, free, lambda x, y: distance(x, y, weights), rng, o.final_shortcuts)
     return prune(path, free) if o.prune else path
 
 

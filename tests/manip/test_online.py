@@ -486,7 +486,8 @@ def test_roadmap_query_hides_the_blocked_edge_and_takes_the_detour(problem, bloc
     after one invalid edge and two searches; the roadmap itself is left as it was."""
     X_WO, a, b, rm = blocked
     before = {k: getattr(rm, k).copy() for k in ("nodes", "edges", "lengths", "weights")}
-    path, stats = _query(problem, blocked, connections=1, shortcut_iterations=0, prune=False)
+    path, stats = _query(problem, blocked, connections=1, shortcut_iterations=0, partial_shortcuts=0,
+                         final_shortcuts=0, prune=False)
     n0, n1, n2 = rm.nodes
     assert np.array_equal(path, np.array([a, n0, n2, n1, b]))
     assert (stats.searches, stats.invalid_edges, stats.rrt_calls) == (2, 1, 0)

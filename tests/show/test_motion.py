@@ -119,3 +119,12 @@ def test_sample_times_refuse_a_bad_rate(view):
     for fps in (0, -1, np.inf, 1000):
         with pytest.raises(ValueError):
             sample_times(view, fps)
+
+
+def test_sample_times_end_at_the_plan_end_whatever_the_rounding(view, monkeypatch):
+    """The last sample is the plan's end exactly, also when rounding to 1 ns lifts it
+    (18.944347742811487 s -> 18.944347743 s was dropped, and the page ended 24 ms early)."""
+    for T in (18.944347742811487, 18.944347742211487, 7.0):
+        monkeypatch.setattr(type(view), "duration", property(lambda self, T=T: T))
+        t = sample_times(view, 25.0)
+        assert t[-1] == T and t[0] == 0.0 and np.all(np.diff(t) > 0)
