@@ -206,12 +206,19 @@ class FingerSpec:
     open: tuple[float, ...]
 
 
+HAND_KINDS = ("auto", "fingertips", "jaw")
+
+
 @dataclass(frozen=True)
 class HandSpec:
     """A hand: its side, the arm group it is mounted on, grasp frame and fingers.
 
     ``contact`` is the contact model for force closure: ``point`` (point contact with
-    friction) or ``soft`` (soft finger, for parallel-jaw grippers).
+    friction) or ``soft`` (soft finger, for parallel-jaw grippers).  ``kind`` says how
+    its grasps are found: ``fingertips`` (seed 000: fingertip IK on surface points, for
+    fingers of three or more joints), ``jaw`` (two fingers on one prismatic joint each:
+    antipodal pairs of surface points, closing until contact) or ``auto`` (``jaw`` when
+    the fingers are so, else ``fingertips``; :class:`regrasp_cli.model.robot.Hand`).
     """
 
     side: str
@@ -219,6 +226,7 @@ class HandSpec:
     grasp_frame: str
     fingers: tuple[FingerSpec, ...]
     contact: str = "point"
+    kind: str = "auto"
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -344,7 +352,7 @@ def _srdf_disabled(srdf: Path, file: Path) -> list[tuple[str, str]]:
 
 
 def _hand(h: Fields, side: str) -> HandSpec:
-    h.only("grasp_frame", "fingers", "contact")
+    h.only("grasp_frame", "fingers", "contact", "kind")
     raw = h.raw("fingers")
     if not isinstance(raw, list) or not raw:
         raise h.error("fingers", "expected a non-empty list of fingers")
@@ -361,7 +369,10 @@ def _hand(h: Fields, side: str) -> HandSpec:
     contact = h.str("contact", "point")
     if contact not in ("point", "soft"):
         raise h.error("contact", f"expected 'point' or 'soft', found {contact!r}")
-    return HandSpec(side, ARM_OF_HAND[side], h.str("grasp_frame"), tuple(fingers), contact)
+    kind = h.str("kind", "auto")
+    if kind not in HAND_KINDS:
+        raise h.error("kind", f"expected one of {', '.join(HAND_KINDS)}, found {kind!r}")
+    return HandSpec(side, ARM_OF_HAND[side], h.str("grasp_frame"), tuple(fingers), contact, kind)
 
 
 # --------------------------------------------------------------------------- scene.yaml

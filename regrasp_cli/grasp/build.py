@@ -1,6 +1,6 @@
 """`regrasp grasps build`: the grasp list of a hand for an object (Saut et al. 2010, §IV-A).
 
-Pipeline: object surface model (:mod:`.surface`) -> finger workspace spheres
+Pipeline (fingertip hands; jaws: :mod:`.jaw`): object surface model (:mod:`.surface`) -> finger workspace spheres
 (:mod:`.workspace`, Algorithm 1, cached) -> grasp frames (:mod:`.frames`: positions in
 the object's bounding box x an incremental SO(3) grid) -> one grasp attempt per frame
 (:mod:`.single`), in parallel over forked processes -> force-closure filter and quality
@@ -25,6 +25,7 @@ import numpy as np
 
 from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.frames import grasp_frames
+from regrasp_cli.grasp.jaw import Jaw, antipodal_pairs, jaw_frames, jaw_geometry, jaw_grasp
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
@@ -108,7 +109,7 @@ class _Search(NamedTuple):
 
     problem: Problem
     surface: Surface
-    workspaces: tuple[FingerWorkspace, ...]  # per finger
+    workspaces: tuple[FingerWorkspace, ...] | Jaw  # per finger; a jaw's geometry instead
     hand_model: HandModel
     rho: float  # m: torque scale (half the object's bounding-box diagonal)
     frames: np.ndarray  # (n, 4, 4) candidate grasp frames X_OG
@@ -121,11 +122,17 @@ def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> 
     if hand not in robot.hands:
         raise InputError(robot.spec.file, "hands", f"the robot has no {hand} hand (it has: {', '.join(robot.hands)})")
     tip_radius = min(f.tip_radius for f in robot.hands[hand].spec.fingers)
-    surface = build_surface(problem.object.mesh, sampling_step(tip_radius), np.random.default_rng(options.seed))
-    ws = hand_workspace(robot, hand, options.workspace, cache_dir)
+    rng = np.random.default_rng(options.seed)
+    surface = build_surface(problem.object.mesh, sampling_step(tip_radius), rng)
     hm = HandModel(robot, hand, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance)
-    hm.voxels(ws)  # built here, so that forked workers inherit them
     rho = float(np.linalg.norm(problem.object.extents) / 2)
+    if robot.hands[hand].kind == "jaw":
+        geometry = jaw_geometry(hm)
+        pairs = antipodal_pairs(problem.object.mesh, surface, problem.spec.object.friction,
+                                (geometry.width_closed, geometry.width_open), options.grasp.antipodal_samples, rng)
+        return _Search(problem, surface, geometry, hm, rho, jaw_frames(geometry, pairs[0], pairs[2], rng), options)
+    ws = hand_workspace(robot, hand, options.workspace, cache_dir)
+    hm.voxels(ws)  # built here, so that forked workers inherit them
     frames = grasp_frames(problem.object.mesh.bounds, options.grasp.n_positions, options.grasp.n_orientations)
     return _Search(problem, surface, ws, hm, rho, frames, options)
 
@@ -135,7 +142,10 @@ def _run_chunk(context: _Search, indices: np.ndarray):
     friction = problem.spec.object.friction
     grasps, stats = [], {}
     for i in indices:
-        g, st = grasp_for_frame(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
+        if isinstance(ws, Jaw):
+            g, st = jaw_grasp(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
+        else:
+            g, st = grasp_for_frame(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
         for k, v in st.items():
             stats[k] = stats.get(k, 0) + v
         if g is not None:
@@ -184,7 +194,8 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     # set and the result does not depend on the number of jobs.  The workers are forked
     # once, after the context above is built, so they inherit it instead of rebuilding it
     # (about 1 s each); chunks still in flight when the target is reached are dropped.
-    order = _frame_order(n // options.grasp.n_orientations, options.grasp.n_orientations)
+    jaw = isinstance(context.workspaces, Jaw)  # its frames come in random order already
+    order = np.arange(n) if jaw else _frame_order(n // options.grasp.n_orientations, options.grasp.n_orientations)
     chunks = [order[i:i + CHUNK] for i in range(0, n, CHUNK)]
     outputs = ordered_map(_run_chunk, chunks, options.jobs, context)
     for chunk, out in zip(chunks, outputs):

@@ -43,6 +43,7 @@ class GraspOptions:
     ik_tolerance: float = 2e-4  # fingertip placement error accepted, m
     ik_iterations: int = 30
     cone_edges: int = 8  # linearised friction cone
+    antipodal_samples: int = 4096  # jaws: surface samples that cast a ray for an antipodal pair (grasp.jaw)
     duplicate_distance: float = 0.01  # m: grasps closer than this (hand position) ...
     duplicate_angle: float = 0.2  # rad: ... and this (hand orientation) are duplicates
     weights: QualityWeights = QualityWeights()
@@ -82,16 +83,17 @@ class HandModel:
         src = robot.collision_model
         gm = pin.GeometryModel()
         self.owner: list[int] = []  # finger index of each geometry, -1 for the palm
+        self.erosion: list[float] = []  # m the fingertips are shrunk by (the contact tolerance)
         tips = {model.frames[t].name for t in h.tip_frames}
         links = []
         for go in src.geometryObjects:
             j = go.parentJoint
             if j == palm_joint or j in hand_joints:
                 name = model.frames[go.parentFrame].name
-                geom = go.geometry
-                if name in tips:
-                    geom = eroded_geometry(go.geometry, tolerance) or go.geometry
-                gm.addGeometryObject(pin.GeometryObject(go.name, j, go.parentFrame, go.placement, geom))
+                geom = eroded_geometry(go.geometry, tolerance) if name in tips else None
+                self.erosion.append(tolerance if geom is not None else 0.0)
+                gm.addGeometryObject(pin.GeometryObject(go.name, j, go.parentFrame, go.placement,
+                                                        geom or go.geometry))
                 self.owner.append(self.finger_of_joint.get(j, -1))
                 links.append(name)
         # object attached to the grasp frame's joint: placement set per grasp frame

@@ -60,6 +60,7 @@ class Hand:
     tip_frames: tuple[int, ...]  # per finger, pinocchio frame id of the tip link
     grasp_frame: int  # pinocchio frame id of the grasp frame G
     open: np.ndarray  # (n_hand_joints,) open configuration, in the order of ``idx``
+    kind: str = "fingertips"  # "fingertips" or "jaw": how its grasps are found (HandSpec.kind)
 
     @property
     def side(self) -> str:
@@ -113,10 +114,19 @@ class Robot:
         self.velocity = np.array([model.velocityLimit[model.joints[j].idx_v] for j in range(1, model.njoints)])
         self.velocity[self.velocity <= 0] = 1.0  # URDFs without limits: a cautious default
 
+        self.prismatic = np.array([model.joints[j].shortname().startswith("JointModelP")
+                                   for j in range(1, model.njoints)], dtype=bool)
+        # URDF mimic joints: follower index -> (leader index, multiplier, offset); the
+        # follower's own value in q is ignored by the kinematics (:meth:`to_pin`)
+        self.mimic: dict[int, tuple[int, float, float]] = {
+            names.index(f): (names.index(l), m, o) for f, (l, m, o) in _mimic_joints(spec).items()
+            if f in names and l in names}
+        self._mimic = np.array([(f, l) for f, (l, _, _) in self.mimic.items()], dtype=int).reshape(-1, 2)
+        self._mimic_mo = np.array([(m, o) for _, m, o in self.mimic.values()], dtype=float).reshape(-1, 2)
         self.groups: dict[str, np.ndarray] = {
             g: self._indices(spec.groups[g], f"groups.{g}") for g in GROUP_NAMES}
         self.hands: dict[str, Hand] = {s: self._hand(h) for s, h in spec.hands.items()}
-        self.q_rest = self.configuration(spec.rest, "rest", base=np.clip(np.zeros(n), lo, hi))
+        self.q_rest = self.coupled(self.configuration(spec.rest, "rest", base=np.clip(np.zeros(n), lo, hi)))
 
     # ------------------------------------------------------------------ names and indices
 
@@ -151,7 +161,24 @@ class Robot:
             raise InputError(self.spec.file, f"{where}.fingers",
                              f"open value {open_[k]} of joint {self.joint_names[idx[k]]} is outside its "
                              f"limits [{self.lower[idx[k]]:.3f}, {self.upper[idx[k]]:.3f}]")
-        return Hand(h, self.groups[h.arm], finger_idx, tips, self.frame_id(h.grasp_frame, f"{where}.grasp_frame"), open_)
+        for f, o in self.mimic.items():
+            k = np.flatnonzero(idx == f)
+            lead = np.flatnonzero(idx == o[0])
+            if k.size and lead.size and abs(open_[k[0]] - (o[1] * open_[lead[0]] + o[2])) > 1e-6:
+                raise InputError(self.spec.file, f"{where}.fingers",
+                                 f"open value {open_[k[0]]} of joint {self.joint_names[f]} does not follow its URDF "
+                                 f"mimic of {self.joint_names[o[0]]} (expected {o[1] * open_[lead[0]] + o[2]:g})")
+        return Hand(h, self.groups[h.arm], finger_idx, tips, self.frame_id(h.grasp_frame, f"{where}.grasp_frame"),
+                    open_, self._hand_kind(h, finger_idx))
+
+    def _hand_kind(self, h: HandSpec, finger_idx: tuple[np.ndarray, ...]) -> str:
+        """``jaw`` for two fingers of one prismatic joint each, else ``fingertips``
+        (unless robot.yaml states it; a stated jaw must be such a hand)."""
+        jaw = len(finger_idx) == 2 and all(len(i) == 1 and self.prismatic[i[0]] for i in finger_idx)
+        if h.kind == "jaw" and not jaw:
+            raise InputError(self.spec.file, f"hands.{h.side}.kind",
+                             "a jaw needs two fingers of one prismatic joint each")
+        return ("jaw" if jaw else "fingertips") if h.kind == "auto" else h.kind
 
     def configuration(self, values: Mapping[str, float], field: str, base: np.ndarray | None = None) -> np.ndarray:
         """A full configuration from ``joint -> value`` (others from ``base``, default rest),
@@ -170,8 +197,20 @@ class Robot:
 
     # ------------------------------------------------------------------ kinematics
 
+    def coupled(self, q: np.ndarray) -> np.ndarray:
+        """``q`` (nq,) or (k, nq) with every mimic joint set from its leader (a copy when
+        the URDF has mimic joints)."""
+        if not self.mimic:
+            return q
+        q = np.array(q, dtype=float)
+        f, l = self._mimic[:, 0], self._mimic[:, 1]
+        q[..., f] = self._mimic_mo[:, 0] * q[..., l] + self._mimic_mo[:, 1]
+        return q
+
     def to_pin(self, q: np.ndarray) -> np.ndarray:
-        """Our configuration -> pinocchio's (cos/sin for continuous joints)."""
+        """Our configuration -> pinocchio's (cos/sin for continuous joints, mimic joints
+        from their leaders)."""
+        q = self.coupled(q)
         if self._identity:
             return q
         qp = np.empty(self.model.nq)
@@ -190,7 +229,7 @@ class Robot:
         q = (self.q_rest if base is None else base).copy()
         idx = np.arange(self.nq) if idx is None else idx
         q[idx] = rng.uniform(self.lower[idx], self.upper[idx])
-        return q
+        return self.coupled(q)
 
     @cached_property
     def urdf_sha256(self) -> str:
@@ -203,6 +242,27 @@ class Robot:
     def link_of_geometry(self, gid: int) -> str:
         """Name of the URDF link a collision geometry belongs to."""
         return self.model.frames[self.collision_model.geometryObjects[gid].parentFrame].name
+
+
+def _mimic_joints(spec: RobotSpec) -> dict[str, tuple[str, float, float]]:
+    """``<mimic joint= multiplier= offset=>`` of the URDF's joints: follower name ->
+    (leader name, multiplier, offset).  pinocchio reads a mimic joint as a free one."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(spec.urdf).getroot()
+    except (ET.ParseError, OSError):
+        return {}  # pinocchio parsed it: a file ElementTree cannot read has no mimic we could honour
+    out = {}
+    for j in root.iter("joint"):
+        m = j.find("mimic")
+        if m is not None and j.get("name") and m.get("joint"):
+            try:
+                out[j.get("name")] = (m.get("joint"), float(m.get("multiplier", 1.0)), float(m.get("offset", 0.0)))
+            except ValueError:
+                raise InputError(spec.urdf, f"joint {j.get('name')}.mimic",
+                                 "expected numbers for multiplier and offset") from None
+    return out
 
 
 class Kinematics:
