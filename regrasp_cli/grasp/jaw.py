@@ -36,6 +36,7 @@ import trimesh
 from regrasp_cli.grasp.quality import grasp_quality
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel
 from regrasp_cli.grasp.surface import Surface
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.spatial import inverse
 
 CONTACT_GAP = 1e-4  # m: a pad this close to the object touches it
@@ -101,11 +102,8 @@ def jaw_geometry(hm: HandModel) -> Jaw:
     X_GW = inverse(hm.X_WG)
     idx = [int(i[0]) for i in hand.finger_idx]
     # finger 0's tip moves along its axis when it closes
-    data = model.createData()
-    tips = []
-    for q in (q_open, q_closed):
-        pin.framesForwardKinematics(model, data, robot.to_pin(q))
-        tips.append([data.oMf[t].translation.copy() for t in hand.tip_frames])
+    kin = Kinematics(robot)
+    tips = [[X[:3, 3] for X in kin.fk_many(q, hand.tip_frames)] for q in (q_open, q_closed)]
     closing_G = np.array([X_GW[:3, :3] @ (tips[1][f] - tips[0][f]) for f in (0, 1)])
     closing_G /= np.maximum(np.linalg.norm(closing_G, axis=1, keepdims=True), 1e-12)
     axis_G = closing_G[0]
@@ -318,9 +316,8 @@ def jaw_grasp(hm: HandModel, jaw: Jaw, surface: Surface, X_OG: np.ndarray, frame
     points, normals, axes = np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3))
     for f in (0, 1):
         # the witness of the geometry truly nearest (an eroded pad touching reads +erosion)
-        k = min(_finger_pairs(hm, f), key=lambda k: pin.computeDistance(hm.gm, hm.gd, k).min_distance
-                - hm.erosion[hm.gm.collisionPairs[k].first])
-        best = pin.computeDistance(hm.gm, hm.gd, k)
+        found = [(pin.computeDistance(hm.gm, hm.gd, k), k) for k in _finger_pairs(hm, f)]
+        best = min(found, key=lambda rk: rk[0].min_distance - hm.erosion[hm.gm.collisionPairs[rk[1]].first])[0]
         axes[f] = X_OG[:3, :3] @ jaw.closing_G[f]
         points[f], normals[f] = contact_patch(surface, X_OW[:3, :3] @ best.getNearestPoint2() + X_OW[:3, 3], axes[f],
                                               _pads(hm, f, X_OW))

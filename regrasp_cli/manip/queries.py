@@ -166,11 +166,12 @@ def smooth(scratch: Scratch, rng: np.random.Generator, path: np.ndarray, world: 
     motion 16.9 s instead of 34.5 s; docs/BENCHMARKS.md)."""
     free = lambda x, y: scratch.segment_free(world, x, y)  # noqa: E731
     o = scratch.options
-    path = shortcut(path, free, lambda x, y: distance(x, y, weights), rng, o.shortcut_iterations)
+    metric = lambda x, y: distance(x, y, weights)  # noqa: E731
+    path = shortcut(path, free, metric, rng, o.shortcut_iterations)
     groups = tuple(scratch.problem.robot.groups.values())
     coarse = lambda x, y: scratch.segment_free(world, x, y, limit=3)  # noqa: E731
     path = partial_shortcut(path, free, groups, o.partial_shortcuts, coarse)
-    path = shortcut(path, free, lambda x, y: distance(x, y, weights), rng, o.final_shortcuts)
+    path = shortcut(path, free, metric, rng, o.final_shortcuts)
     return prune(path, free) if o.prune else path
 
 

@@ -270,6 +270,7 @@ class CollisionWorld:
         self._scaled = {1.0: (self.geometry_data, self.manager)}  # margin scale -> its checker
         self.X_PO = None if model.object is None else model.object.X_PO
         self.n_checks = 0
+        self.certified = bool(model.margins.any())  # some pair keeps a clearance at the checked configurations
 
     def _checker(self, scale: float) -> tuple[pin.GeometryData, pin.BroadPhaseManager_DynamicAABBTreeCollisionManager]:
         """Geometry data keeping ``scale`` times the model's margins, and its broadphase."""
@@ -303,11 +304,6 @@ class CollisionWorld:
         self.X_PO = X_PO
 
     # ------------------------------------------------------------------ checks
-
-    @property
-    def certified(self) -> bool:
-        """True when some pair keeps a clearance (a margin) at the checked configurations."""
-        return bool(self.model.margins.any())
 
     def is_free(self, q: np.ndarray, scale: float = 1.0) -> bool:
         """True when the configuration (nq,) is collision-free (early exit), every pair
