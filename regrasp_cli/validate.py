@@ -41,7 +41,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from time import perf_counter
 
+import coal
 import numpy as np
+import pinocchio as pin
 import trimesh
 
 from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
@@ -440,6 +442,12 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
             if f not in fingers or not np.linalg.norm(n) > 1e-12:
                 continue  # reported by contact_issues
             j = fingers[f]
+            if hand.kind == "jaw":  # a pad touches anywhere on the finger's surface
+                d = _finger_distance(robot, hand, j, q, X_WO[:3, :3] @ p + X_WO[:3, 3])
+                if d > TIP_TOL:
+                    out.append(Issue(phase.name, 0, "grasp",
+                                     f"grasp {g.id}: the {f} pad is {d * 1000:.3g} mm from its contact"))
+                continue
             target_O = p + hand.spec.fingers[j].tip_radius * n / np.linalg.norm(n)
             p_W = X_WO[:3, :3] @ target_O + X_WO[:3, 3]
             d = float(np.linalg.norm(kin.fk(q, hand.tip_frames[j])[:3, 3] - p_W))
@@ -447,6 +455,25 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
                 out.append(Issue(phase.name, 0, "grasp",
                                  f"grasp {g.id}: the {f} fingertip is {d * 1000:.3g} mm from its contact"))
     return out
+
+
+def _finger_distance(robot: Robot, hand, finger: int, q: np.ndarray, p_W: np.ndarray) -> float:
+    """Distance (m) from the point p_W (3,) to the surface of the collision geometries
+    carried by the finger's joints at q (its pads), by coal: 0 on the surface, the depth
+    when inside."""
+    joints = {robot.model.getJointId(robot.joint_names[i]) for i in hand.finger_idx[finger]}
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, robot.to_pin(q))
+    point, X_point = coal.Sphere(1e-9), coal.Transform3s(np.eye(3), p_W)
+    best = np.inf
+    for go in robot.collision_model.geometryObjects:
+        if go.parentJoint in joints:
+            X = data.oMi[go.parentJoint] * go.placement
+            r = coal.DistanceResult()
+            coal.distance(go.geometry, coal.Transform3s(X.rotation, X.translation), point, X_point,
+                          coal.DistanceRequest(), r)
+            best = min(best, abs(r.min_distance))
+    return float(best)
 
 
 # ------------------------------------------------------------------ the whole plan

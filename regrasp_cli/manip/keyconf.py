@@ -110,7 +110,10 @@ def free_arm_cost(scratch: Scratch, hand: str, q: np.ndarray) -> float:
 
     def plane_distance(qc, p):
         s_r, s_l = shoulder(scratch, "right", qc), shoulder(scratch, "left", qc)
-        torso = scratch.kin.fk(qc, robot.joint_names[robot.groups["torso"][0]])[:3, 3]
+        if len(robot.groups["torso"]):
+            torso = scratch.kin.fk(qc, robot.joint_names[robot.groups["torso"][0]])[:3, 3]
+        else:  # no torso joint (Baxter): the vertical plane through the shoulders
+            torso = (s_r + s_l) / 2 - np.array([0.0, 0.0, 0.3])
         n = np.cross(s_r - torso, s_l - torso)
         n /= max(np.linalg.norm(n), 1e-9)
         return abs(float(n @ (p - torso)))

@@ -121,7 +121,24 @@ def _mug() -> trimesh.Trimesh:
     return _combine([body, handle])
 
 
-_BUILTINS: dict[str, Callable[[], trimesh.Trimesh]] = {"statuette": _statuette, "mug": _mug}
+def _block() -> trimesh.Trimesh:
+    """Wooden block, 4 x 4 x 12 cm: narrow enough for Baxter's shipped jaw (4.8 cm open)."""
+    return _upright(creation.box(extents=(0.04, 0.04, 0.12)))
+
+
+def _can() -> trimesh.Trimesh:
+    """Can of 2 cm radius, 11 cm tall."""
+    return _upright(creation.cylinder(radius=0.02, height=0.11, sections=48))
+
+
+def _upright(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The mesh moved so the origin is the centre of its base footprint (minimum z = 0)."""
+    mesh.apply_translation([0.0, 0.0, -mesh.bounds[0, 2]])
+    return mesh
+
+
+_BUILTINS: dict[str, Callable[[], trimesh.Trimesh]] = {"statuette": _statuette, "mug": _mug, "block": _block,
+                                                       "can": _can}
 
 
 def builtin_names() -> tuple[str, ...]:
@@ -132,9 +149,10 @@ def builtin_names() -> tuple[str, ...]:
 def make_builtin(name: str) -> trimesh.Trimesh:
     """Build the procedural object ``name`` (without the ``builtin:`` prefix).
 
-    All built-ins are non-convex, deterministic, 1,000-3,000 triangles, in metres, about
-    0.2 m tall, with parts 1-8 cm thick, object frame at the centre of the base footprint,
-    +z up (minimum z = 0).  They are built from trimesh primitives: with trimesh's
+    All built-ins are deterministic, in metres, object frame at the centre of the base
+    footprint, +z up (minimum z = 0).  ``statuette`` and ``mug`` are non-convex, 1,000-3,000
+    triangles, about 0.2 m tall, with parts 1-8 cm thick; ``block`` and ``can`` are the
+    small convex objects a narrow parallel-jaw gripper can hold.  They are built from trimesh primitives: with trimesh's
     ``manifold`` boolean engine (package ``manifold3d``) the parts are united into one
     watertight shell; without it the parts are concatenated into a multi-shell mesh
     (like a real scan): each shell is closed, so trimesh still calls it watertight, but
