@@ -1,16 +1,23 @@
-"""Cached artefacts of a scene (grasp lists, roadmap): their build options from the
-defaults, the scene and the command line, and loading them, built first when missing
-or stale.  Library code: progress is the caller's business (a :class:`Builder`)."""
+"""Cached artefacts of a scene (grasp lists, roadmap): their file names, their build
+options from the defaults, the scene and the command line, and loading them, built first
+when missing or stale.  Library code: progress is the caller's business (a :class:`Builder`).
+
+File names carry the robot's identity (:func:`~regrasp_cli.store.robot_identity`), so
+two robots sharing a cache never overwrite each other's artefacts.  An empty grasp list is
+never written: :func:`build_grasp_list` raises :class:`~regrasp_cli.errors.EmptyGraspList`
+with the reason from the build's counters.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Protocol
+from typing import Callable, Protocol
 
-from regrasp_cli.errors import InputError, StaleArtefactError
+from regrasp_cli.errors import EmptyGraspList, InputError, StaleArtefactError
+from regrasp_cli.grasp import build as gb
 from regrasp_cli.grasp.build import BuildOptions, GraspList
 from regrasp_cli.roadmap.build import RoadmapArtefact, RoadmapOptions
-from regrasp_cli.scene import Problem
+from regrasp_cli.scene import Problem, load_problem
 from regrasp_cli.store import artefact_lock, sha256_file
 
 
@@ -29,14 +36,70 @@ class QuietBuilder:
         pass
 
     def grasps(self, scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> None:
-        from regrasp_cli.grasp.build import build_grasps
-
-        build_grasps(scene, cache_dir, hand, options)
+        build_grasp_list(scene, cache_dir, hand, options)
 
     def roadmap(self, scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: int) -> None:
         from regrasp_cli.roadmap.build import build_roadmap
 
         build_roadmap(scene, cache_dir, options, jobs)
+
+
+# ------------------------------------------------------------------ grasp lists
+
+
+def grasp_list_path(cache_dir: Path, problem: Problem, hand: str, options: BuildOptions) -> Path:
+    return gb.artefact_path(cache_dir, problem, hand, options)
+
+
+def build_grasp_list(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
+                     progress: Callable[[int, int, int], None] | None = None,
+                     problem: Problem | None = None) -> tuple[GraspList, gb.BuildReport]:
+    """Build ``hand``'s grasp list into :func:`grasp_list_path` (``progress`` as for
+    :func:`~regrasp_cli.grasp.build.build_grasps`; ``problem``: the scene, already loaded).
+
+    Raises:
+        EmptyGraspList: no grasp found, with the reason; nothing is written.
+    """
+    scene, cache_dir = Path(scene).resolve(), Path(cache_dir).resolve()
+    problem = problem or load_problem(scene, cache_dir)
+    with artefact_lock(grasp_list_path(cache_dir, problem, hand, options)):
+        glist, report = gb.build_grasps(scene, cache_dir, hand, options, progress)
+    if len(glist) == 0:
+        raise EmptyGraspList(hand, empty_grasps_reason(problem, hand, report))
+    return glist, report
+
+
+def empty_grasps_reason(problem: Problem, hand: str, report: gb.BuildReport) -> str:
+    """Why a build found no grasp, from its counters: what rejected the candidate frames."""
+    obj = problem.object
+    what = f"{obj.name} ({' x '.join(f'{e:.3g}' for e in obj.extents)} m)"
+    if report.frames == 0:
+        if problem.robot.hands[hand].kind == "jaw":
+            from regrasp_cli.grasp.jaw import jaw_geometry
+            from regrasp_cli.grasp.single import HandModel
+
+            jaw = jaw_geometry(HandModel(problem.robot, hand, obj.mesh, problem.disabled.links(),
+                                         problem.spec.planning.contact_tolerance))
+            return (f"no antipodal pair of points on {what} fits between the jaw's pads (from "
+                    f"{1000 * jaw.width_closed:.1f} to {1000 * jaw.width_open:.1f} mm apart), so no grasp frame "
+                    "was tried")
+        return f"no candidate grasp frame on {what}"
+    few = report.frames - report.frames_palm_blocked - report.frames_with_contacts
+    causes = ((report.frames_palm_blocked, "the palm inside the object"), (few, "too few contacts"),
+              (report.frames_with_contacts - report.force_closure, "the closed hand colliding or no force closure"))
+    because = ", ".join(f"{n} with {why}" for n, why in causes if n > 0)
+    return f"0 of {report.frames} candidate grasp frames on {what} gave a grasp ({because})"
+
+
+def _read_grasp_list(path: Path, prov) -> GraspList:
+    """A cached grasp list; an empty one (written by an earlier regrasp) is refused as stale."""
+    g = gb.read_grasp_list(path, prov)
+    if len(g) == 0:
+        raise StaleArtefactError(path, None, "holds no grasp; rebuild it with `regrasp grasps build` to see why")
+    return g
+
+
+# ------------------------------------------------------------------ options
 
 
 def _positive(value, name: str) -> None:
@@ -83,7 +146,6 @@ def load_artefacts(scene: Path, cache_dir: Path, problem: Problem, build: bool, 
     """The grasp lists of both hands and the roadmap, built when missing or stale unless
     ``build`` is False (then a missing or stale one raises an InputError naming it).
     ``builder`` builds a missing one (the CLI's shows progress); default: quietly."""
-    from regrasp_cli.grasp import build as gb
     from regrasp_cli.roadmap import build as rb
 
     builder = builder or QuietBuilder()
@@ -93,8 +155,8 @@ def load_artefacts(scene: Path, cache_dir: Path, problem: Problem, build: bool, 
     lists, hashes = {}, {}
     for hand in ("right", "left"):
         lists[hand], hashes[f"grasps_{hand}"] = _cached(
-            gb.artefact_path(cache_dir, problem, hand, options), gb.provenance(problem, hand, options), build,
-            lambda: builder.grasps(scene, cache_dir, hand, options), gb.read_grasp_list, builder)
+            grasp_list_path(cache_dir, problem, hand, options), gb.provenance(problem, hand, options), build,
+            lambda: builder.grasps(scene, cache_dir, hand, options), _read_grasp_list, builder)
     art = None
     if need_roadmap:
         r_opts = roadmap_options(spec, roadmap_nodes, False, None)

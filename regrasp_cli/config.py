@@ -204,29 +204,39 @@ class FingerSpec:
     tip_link: str
     tip_radius: float
     open: tuple[float, ...]
+    closed: tuple[float, ...] | None = None  # pads hands: where closing ends (default: the far limits)
 
 
-HAND_KINDS = ("auto", "fingertips", "jaw")
+HAND_KINDS = ("auto", "fingertips", "jaw", "pads")
 
 
 @dataclass(frozen=True)
 class HandSpec:
     """A hand: its side, the arm group it is mounted on, grasp frame and fingers.
 
+    ``grasp_frame`` names a URDF link, or a link and an offset (``{link, xyz, rpy}``: the
+    frame is added to the model, so the URDF need not be edited).  ``opposing`` names the
+    finger that opposes the others (the thumb), which the fingertip search places first.
+
     ``contact`` is the contact model for force closure: ``point`` (point contact with
     friction) or ``soft`` (soft finger, for parallel-jaw grippers).  ``kind`` says how
     its grasps are found: ``fingertips`` (seed 000: fingertip IK on surface points, for
     fingers of three or more joints), ``jaw`` (two fingers on one prismatic joint each:
-    antipodal pairs of surface points, closing until contact) or ``auto`` (``jaw`` when
-    the fingers are so, else ``fingertips``; :class:`regrasp_cli.model.robot.Hand`).
+    antipodal pairs of surface points, closing until contact), ``pads`` (fingers of one or
+    two joints: approach along a surface normal, each finger closed from ``open`` to
+    ``closed`` until it touches) or ``auto`` (``jaw`` when the fingers are so, else
+    ``pads`` when a finger has fewer than three joints, else ``fingertips``;
+    :class:`regrasp_cli.model.robot.Hand`).
     """
 
     side: str
     arm: str
-    grasp_frame: str
+    grasp_frame: str  # a URDF link or frame
     fingers: tuple[FingerSpec, ...]
     contact: str = "point"
     kind: str = "auto"
+    grasp_offset: tuple[tuple[float, ...], tuple[float, ...]] | None = None  # (xyz m, rpy rad) from grasp_frame
+    opposing: str | None = None  # the finger that opposes the others (the thumb), by name
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -352,27 +362,46 @@ def _srdf_disabled(srdf: Path, file: Path) -> list[tuple[str, str]]:
 
 
 def _hand(h: Fields, side: str) -> HandSpec:
-    h.only("grasp_frame", "fingers", "contact", "kind")
+    h.only("grasp_frame", "fingers", "contact", "kind", "opposing")
     raw = h.raw("fingers")
     if not isinstance(raw, list) or not raw:
         raise h.error("fingers", "expected a non-empty list of fingers")
     fingers = []
     for i, _ in enumerate(raw):
         fi = Fields(h.file, raw[i], h.path(f"fingers[{i}]"))
-        fi.only("name", "joints", "tip_link", "tip_radius", "open")
+        fi.only("name", "joints", "tip_link", "tip_radius", "open", "closed")
         joints = fi.names("joints")
         if not joints:
             raise fi.error("joints", "expected at least one joint")
         opened = fi.vector("open", len(joints)) if fi.has("open") else (0.0,) * len(joints)
+        closed = fi.vector("closed", len(joints)) if fi.has("closed") else None
         fingers.append(FingerSpec(fi.str("name", f"finger{i}"), joints, fi.str("tip_link"),
-                                  fi.float("tip_radius", positive=True), opened))
+                                  fi.float("tip_radius", positive=True), opened, closed))
     contact = h.str("contact", "point")
     if contact not in ("point", "soft"):
         raise h.error("contact", f"expected 'point' or 'soft', found {contact!r}")
     kind = h.str("kind", "auto")
     if kind not in HAND_KINDS:
         raise h.error("kind", f"expected one of {', '.join(HAND_KINDS)}, found {kind!r}")
-    return HandSpec(side, ARM_OF_HAND[side], h.str("grasp_frame"), tuple(fingers), contact, kind)
+    names = [f.name for f in fingers]
+    if len(set(names)) != len(names):
+        raise h.error("fingers", f"finger names must differ, found {names}")
+    opposing = h.str("opposing", None)
+    if opposing is not None and opposing not in names:
+        raise h.error("opposing", f"expected the name of one of the fingers ({', '.join(names)}), found {opposing!r}")
+    link, offset = _grasp_frame(h)
+    return HandSpec(side, ARM_OF_HAND[side], link, tuple(fingers), contact, kind, offset, opposing)
+
+
+def _grasp_frame(h: Fields) -> tuple[str, tuple[tuple[float, ...], tuple[float, ...]] | None]:
+    """``grasp_frame: LINK`` or ``grasp_frame: {link: LINK, xyz: [..], rpy: [..]}``."""
+    if not isinstance(h.raw("grasp_frame"), dict):
+        return h.str("grasp_frame"), None
+    g = h.sub("grasp_frame")
+    g.only("link", "xyz", "rpy")
+    xyz = g.vector("xyz", 3) if g.has("xyz") else (0.0, 0.0, 0.0)
+    rpy = g.vector("rpy", 3) if g.has("rpy") else (0.0, 0.0, 0.0)
+    return g.str("link"), (xyz, rpy)
 
 
 # --------------------------------------------------------------------------- scene.yaml

@@ -42,3 +42,31 @@ class StaleArtefactError(InputError):
 class CorruptArtefactError(StaleArtefactError):
     """A cached artefact whose contents are damaged: unreadable (truncated, empty) or not
     matching the checksum written with them.  Rebuilding fixes it, like a stale one."""
+
+
+class EmptyResultError(RegraspError):
+    """A build that found nothing: a grasp list without grasps, a roadmap without nodes
+    (exit code 1).  Nothing is written; the message says what rejected every candidate,
+    so that the scene, robot or options can be fixed.
+
+    Args:
+        message: what is empty and why, e.g. ``the right hand's grasp list is empty: ...``.
+    """
+
+    exit_code = 1
+
+    def __init__(self, message: str):
+        self.message = message
+        super().__init__(message)
+
+
+class EmptyGraspList(EmptyResultError):
+    """No grasp of the object for a hand: ``hand`` names it."""
+
+    def __init__(self, hand: str, reason: str):
+        self.hand, self.reason = hand, reason
+        super().__init__(f"the {hand} hand's grasp list is empty: {reason}")
+
+
+class EmptyRoadmap(EmptyResultError):
+    """An elementary roadmap or the Super Graph without a node."""

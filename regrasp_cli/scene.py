@@ -16,7 +16,7 @@ from regrasp_cli.errors import InputError
 from regrasp_cli.model.collision import CollisionOptions, CollisionWorld, ObjectPlacement, collision_world
 from regrasp_cli.model.objects import ObjectMesh, load_object_mesh
 from regrasp_cli.model.robot import Robot, load_robot
-from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
+from regrasp_cli.model.selfcollision import DisabledPairs, PairProgress, disabled_pairs
 
 
 @dataclass(frozen=True)
@@ -42,7 +42,9 @@ class Problem:
         return ObjectPlacement(self.object.mesh, X_WO)
 
 
-def load_problem(path: str | Path, cache_dir: Path | None) -> Problem:
+def load_problem(path: str | Path, cache_dir: Path | None, progress: PairProgress | None = None) -> Problem:
+    """The scene at ``path`` loaded, the robot's self-collision matrix read from
+    ``cache_dir`` or computed (reporting to ``progress(done, total)``, if given)."""
     spec = load_scene_spec(path)
     robot = load_robot(spec.robot)
     obj = load_object_mesh(spec.object.mesh, base_dir=spec.file.parent, scale=spec.object.scale,
@@ -68,4 +70,4 @@ def load_problem(path: str | Path, cache_dir: Path | None) -> Problem:
                 q[key] = robot.configuration(value, f"task.{key}")
             except InputError as exc:
                 raise InputError(spec.file, exc.field, exc.message) from None
-    return Problem(spec, robot, obj, disabled_pairs(robot, cache_dir), q["robot_start"], q["robot_goal"])
+    return Problem(spec, robot, obj, disabled_pairs(robot, cache_dir, progress), q["robot_start"], q["robot_goal"])

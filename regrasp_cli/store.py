@@ -46,6 +46,7 @@ import dataclasses
 import hashlib
 import json
 import os
+import re
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
@@ -71,10 +72,12 @@ __all__ = [
     "check_writable",
     "canonical_json",
     "content_digest",
+    "file_label",
     "is_fresh",
     "why_not_fresh",
     "read_artefact",
     "read_provenance",
+    "robot_identity",
     "sha256_bytes",
     "sha256_file",
     "sha256_params",
@@ -153,6 +156,27 @@ def content_digest(attrs: Mapping[str, AttrValue], data: Mapping[str, np.ndarray
         h.update(f"{name}\0{kind}\0{arr.shape}\0{len(payload)}\0".encode("utf-8"))
         h.update(payload)
     return h.hexdigest()
+
+
+def robot_identity(robot) -> str:
+    """A short name of a robot for artefact file names, e.g. ``baxter-1a2b3c4d``: the
+    robot.yaml's folder (its file stem when it is not called ``robot.yaml``) and 8 hex
+    digits of the SHA-256 of the URDF and the hands (``robot.spec.hands``, the part of the
+    robot.yaml a grasp depends on).  Two robots sharing a cache get different names, so
+    neither overwrites the other's artefacts; the provenance inside still decides whether
+    a file is fresh.  ``robot``: a loaded :class:`~regrasp_cli.model.robot.Robot` (its
+    ``spec.file``, ``spec.hands`` and ``urdf_sha256`` are read)."""
+    file = Path(robot.spec.file)
+    stem = file.parent.name if file.name == "robot.yaml" and file.parent.name else file.stem
+    hands = {side: repr(spec) for side, spec in sorted(robot.spec.hands.items())}  # repr: any field type
+    digest = sha256_params({"urdf": robot.urdf_sha256, "hands": hands})[:8]
+    return f"{file_label(stem)}-{digest}"
+
+
+def file_label(name: str) -> str:
+    """``name`` with every run of characters other than letters, digits, ``_``, ``.``
+    and ``-`` replaced by ``_`` (safe in a file name on every system)."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name) or "_"
 
 
 # ---------------------------------------------------------------------- atomic writes

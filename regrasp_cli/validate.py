@@ -442,7 +442,7 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
             if f not in fingers or not np.linalg.norm(n) > 1e-12:
                 continue  # reported by contact_issues
             j = fingers[f]
-            if hand.kind == "jaw":  # a pad touches anywhere on the finger's surface
+            if hand.kind != "fingertips":  # a pad touches anywhere on the finger's surface
                 d = _finger_distance(robot, hand, j, q, X_WO[:3, :3] @ p + X_WO[:3, 3])
                 if d > TIP_TOL:
                     out.append(Issue(phase.name, 0, "grasp",

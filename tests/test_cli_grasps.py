@@ -31,11 +31,10 @@ pytestmark = needs_separate_stderr
 @pytest.fixture(scope="module")
 def built(problem, cache_dir):
     """One small `grasps build` into the session cache: (result, path of the list)."""
-    from regrasp_cli.grasp.build import artefact_path
-    from regrasp_cli.artefacts import build_options
+    from regrasp_cli.artefacts import build_options, grasp_list_path
 
     result = run("--cache-dir", cache_dir, "grasps", "build", SCENE_YAML, *SMALL)
-    path = artefact_path(Path(cache_dir).resolve(), problem, "right", build_options(0, None, 1, 8, 64, 0))
+    path = grasp_list_path(Path(cache_dir).resolve(), problem, "right", build_options(0, None, 1, 8, 64, 0))
     return result, path
 
 

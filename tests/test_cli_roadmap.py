@@ -120,24 +120,23 @@ def test_show_missing_file(tmp_path):
     assert_one_error_line(run("roadmap", "show", missing), str(missing))
 
 
-def test_build_with_no_free_configuration_gives_an_empty_roadmap(problem, cache_dir, tmp_path):
-    """A box around the shoulders: every sample collides, the roadmaps are empty (this
-    used to crash with a numpy reshape error)."""
+def test_build_with_no_free_configuration_is_an_error_naming_the_cause(problem, cache_dir, tmp_path):
+    """A box around the shoulders: every sample collides.  The roadmap is not written as
+    a success (this used to write one with 0 nodes, and before that to crash with a numpy
+    reshape error): exit 1, one line naming the pairs that rejected the samples."""
     s = scene_dict()
     s["obstacles"].append({"name": "cage", "box": {"size": [0.3, 0.3, 0.3]}, "pose": {"xyz": [0.0, 0.0, 1.2]}})
     scene = write_scene(tmp_path / "cage.yaml", s)
     d = fresh_cache(tmp_path, cache_dir)
     result = run("--cache-dir", d, "roadmap", "build", scene, "--nodes", "4", "--jobs", "1", "--tree")
-    assert result.exit_code == 0, (result.output, result.exception)
-    rows = table_rows(result.stdout)
-    assert "tree mode" in result.stdout
-    assert rows["R_r (torso + right arm)"].startswith("0 nodes")
-    assert rows["Super Graph"].startswith("0 nodes")
-    files = list((d / "roadmap").glob("*.h5"))
-    assert len(files) == 1
-    shown = run("--cache-dir", d, "roadmap", "show", files[0], "--scene", scene)
-    assert shown.exit_code == 0, (shown.output, shown.exception)
-    assert table_rows(shown.stdout)["Super Graph"].startswith("0 nodes")
+    assert result.exit_code == 1, (result.output, result.exception)
+    assert "Traceback" not in result.output
+    errors = [ln for ln in result.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1, result.stderr
+    for words in ("the roadmap is empty", "R_r (torso + right arm) has no node", "samples collide",
+                  "–obstacle:cage", "rest configuration"):
+        assert words in errors[0], (words, errors[0])
+    assert not list((d / "roadmap").glob("*.h5"))
 
 
 # --------------------------------------------------------------------------- help

@@ -18,9 +18,11 @@ from regrasp_cli.store import (
     atomic_write_bytes,
     atomic_write_text,
     content_digest,
+    file_label,
     is_fresh,
     read_artefact,
     read_provenance,
+    robot_identity,
     sha256_bytes,
     sha256_file,
     sha256_params,
@@ -323,3 +325,38 @@ def test_is_fresh(artefact: Path, tmp_path: Path) -> None:
     garbage.write_bytes(b"junk")
     assert not is_fresh(garbage, PROV)  # damaged: rebuilt
     assert why_not_fresh(tmp_path / "none.h5", PROV) == "missing" and why_not_fresh(artefact, PROV) is None
+
+
+# --------------------------------------------------------------------------- robot identity
+
+
+@dataclasses.dataclass(frozen=True)
+class _Hand:
+    grasp_frame: str
+    fingers: tuple[str, ...]
+
+
+def _robot(file: str, urdf: str = "u", hands: dict | None = None):
+    """What robot_identity reads of a Robot: spec.file, spec.hands, urdf_sha256."""
+    from types import SimpleNamespace
+
+    hands = {"right": _Hand("r_palm", ("a", "b")), "left": _Hand("l_palm", ("a", "b"))} if hands is None else hands
+    return SimpleNamespace(spec=SimpleNamespace(file=Path(file), hands=hands), urdf_sha256=sha256_bytes(urdf.encode()))
+
+
+def test_robot_identity_is_the_folder_or_stem_and_a_hash_of_urdf_and_hands() -> None:
+    ident = robot_identity(_robot("/x/robots/baxter/robot.yaml"))
+    name, digest = ident.rsplit("-", 1)
+    assert name == "baxter" and len(digest) == 8 and int(digest, 16) >= 0
+    assert robot_identity(_robot("/y/other/place/baxter/robot.yaml")) == ident  # only the folder's name counts
+    assert robot_identity(_robot("/x/my bot.yaml")).startswith("my_bot-")  # the stem, made safe
+    assert robot_identity(_robot("/x/robots/baxter/robot.yaml", urdf="v")) != ident
+    other_hands = {"right": _Hand("r_palm", ("a",)), "left": _Hand("l_palm", ("a", "b"))}
+    assert robot_identity(_robot("/x/robots/baxter/robot.yaml", hands=other_hands)) != ident
+    swapped = {"left": _Hand("l_palm", ("a", "b")), "right": _Hand("r_palm", ("a", "b"))}
+    assert robot_identity(_robot("/x/robots/baxter/robot.yaml", hands=swapped)) == ident  # order of hands
+
+
+def test_file_label() -> None:
+    assert file_label("builtin_block") == "builtin_block"
+    assert file_label("a b/c:d") == "a_b_c_d" and file_label("") == "_"

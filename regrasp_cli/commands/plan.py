@@ -1,8 +1,10 @@
 """`regrasp plan SCENE`: cached artefacts in, plan JSON out, a Table I summary printed.
 
-Missing or stale artefacts (grasp lists, roadmap) are built first with their progress
-bars, or refused with ``--no-build``.  The plan is then checked by the independent
-validator (:mod:`regrasp_cli.validate`) before the command reports success.
+The robot's start and goal configurations are checked first (nothing else matters if
+they collide).  Missing or stale artefacts (grasp lists, roadmap) are then built with
+their progress bars, or refused with ``--no-build``; an empty one fails the plan at stage
+``grasps`` or ``roadmap`` with the build's reason.  The plan is then checked by the
+independent validator (:mod:`regrasp_cli.validate`) before the command reports success.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from rich.table import Table
 
 from regrasp_cli.artefacts import load_artefacts
 from regrasp_cli.commands.report import CliBuilder
+from regrasp_cli.errors import EmptyGraspList, EmptyRoadmap
 from regrasp_cli.manip.context import OnlineOptions
 from regrasp_cli.manip.ompl_peer import ompl_version
 from regrasp_cli.manip.queries import Roadmap
@@ -22,7 +25,7 @@ from regrasp_cli.manip.solve import Outcome
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.manip.tasks import handover
 from regrasp_cli.roadmap.build import RoadmapOptions
-from regrasp_cli.scene import load_problem
+from regrasp_cli.commands.progress import load_problem_shown
 from regrasp_cli.store import check_writable
 from regrasp_cli.trajectory import Plan, write_plan
 
@@ -59,12 +62,21 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     check_writable(out_file, "--output")  # before the work, not after it
     if planner == "ompl-rrtconnect":
         ompl_version()  # InputError naming the extra before anything is loaded
-    problem = load_problem(scene, cache_dir)
-    lists, art, hashes = load_artefacts(scene, cache_dir, problem, build, jobs, planner == "roadmap",
-                                        CliBuilder(console), roadmap_nodes, grasp_target)
+    problem = load_problem_shown(scene, cache_dir)
     seed = problem.spec.planning.seed if seed is None else seed
     options = OnlineOptions(planner=planner, jobs=jobs)
-    outcome = handover.plan(problem, lists, Roadmap.of(art) if art is not None else None, options, seed)
+    lists, art, hashes = {}, None, {}
+    failure = handover.ends_failure(problem, options)  # before building anything for them
+    if failure is None:
+        try:
+            lists, art, hashes = load_artefacts(scene, cache_dir, problem, build, jobs, planner == "roadmap",
+                                                CliBuilder(console), roadmap_nodes, grasp_target)
+        except (EmptyGraspList, EmptyRoadmap) as exc:
+            failure = PlanningFailed(Stage.GRASPS if isinstance(exc, EmptyGraspList) else Stage.ROADMAP, exc.message)
+    if failure is not None:
+        outcome = handover.failed(problem, failure)
+    else:
+        outcome = handover.plan(problem, lists, Roadmap.of(art) if art is not None else None, options, seed)
     plan = make_plan(problem, lists, outcome, options, seed, out_file, cache_dir, hashes, timings)
     write_plan(out_file, plan)
     if outcome.failure is not None:

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import click
 import numpy as np
 from rich.console import Console
 from rich.table import Table
 
 from regrasp_cli.model.reach import Reach, reach
-from regrasp_cli.artefacts import _positive, build_options, roadmap_options
-from regrasp_cli.scene import Problem, load_problem
+from regrasp_cli.artefacts import _positive, build_grasp_list, build_options, roadmap_options
+from regrasp_cli.commands.progress import load_problem_shown
+from regrasp_cli.scene import Problem
 
 
 def _fmt(v, n=3) -> str:
@@ -31,7 +33,7 @@ def reachability(problem: Problem, rng: np.random.Generator) -> dict[tuple[str, 
 
 def print_info(scene: Path, cache_dir: Path, seed: int | None, console: Console | None = None) -> None:
     console = console or Console()
-    problem = load_problem(scene, cache_dir)
+    problem = load_problem_shown(scene, cache_dir)
     robot, spec = problem.robot, problem.spec
     rng = np.random.default_rng(spec.planning.seed if seed is None else seed)
 
@@ -143,15 +145,15 @@ def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, 
 
 def build_grasp_lists(scene: Path, cache_dir: Path, hands: list[str], options, console: Console) -> None:
     """Build the grasp lists of ``hands`` with ``options`` (a BuildOptions), with progress
-    bars and the summary tables."""
+    bars and the summary tables.  Raises EmptyResultError naming every hand whose list is
+    empty (and why), after building the others."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from regrasp_cli.config import load_scene_spec
-    from regrasp_cli.grasp.build import build_grasps
+    from regrasp_cli.errors import EmptyGraspList, EmptyResultError
 
-    spec = load_scene_spec(scene)
-    load_problem(scene, cache_dir)  # every input error before the progress bars start
-    reports = []
+    problem = load_problem_shown(scene, cache_dir)  # every input error before the progress bars start
+    spec = problem.spec
+    reports, empty = [], []
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=console, transient=False) as bar:
         for h in hands:
@@ -161,8 +163,20 @@ def build_grasp_lists(scene: Path, cache_dir: Path, hands: list[str], options, c
                 bar.update(t, completed=done, total=total,
                            description=f"{h} hand: grasp frames ({kept} grasps)")
 
-            glist, rep = build_grasps(scene, cache_dir, h, options, progress=show)
-            reports.append((glist, rep))
+            try:
+                reports.append(build_grasp_list(scene, cache_dir, h, options, show, problem))
+            except EmptyGraspList as exc:
+                empty.append(exc)
+    if reports:
+        _grasp_tables(spec, reports, console)
+    if len(empty) > 1:
+        raise EmptyResultError("; ".join(exc.message for exc in empty))
+    if empty:
+        raise empty[0]
+
+
+def _grasp_tables(spec, reports: list, console: Console) -> None:
+    """The summary and time tables of built grasp lists ((GraspList, BuildReport) each)."""
     t = Table(title=f"Grasp lists ({spec.object.mesh}, friction {spec.object.friction:g})")
     for c in ("hand", "frames tried", "palm in object", "enough contacts", "force closure", "kept (distinct)",
               "best quality", "time (s)", "grasps/s"):
@@ -195,7 +209,7 @@ def show_grasps(file: Path, best: int, scene: Path | None, cache_dir: Path, cons
     if scene is not None:
         # the list's own build options, with the scene's robot, object and friction: a list
         # built with other options is not stale, one for another object or robot is
-        problem = load_problem(scene, cache_dir)
+        problem = load_problem_shown(scene, cache_dir)
         expected = provenance(problem, str(_hand_of(file)), stored_options(file))
     glist = read_grasp_list(file, expected)
     t = provenance_table(file, prov)
@@ -230,12 +244,12 @@ def run_roadmap_build(scene: Path, cache_dir: Path, nodes: int, tree: bool, seed
 
 def build_roadmap_shown(scene: Path, cache_dir: Path, options, jobs: int, console: Console) -> None:
     """Build the roadmap with ``options`` (a RoadmapOptions), with progress bars and the
-    summary tables."""
+    summary tables; its warnings go to stderr.  An empty roadmap raises EmptyRoadmap."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from regrasp_cli.roadmap.build import build_roadmap
 
-    load_problem(scene, cache_dir)  # every input error before the progress bars start
+    load_problem_shown(scene, cache_dir)  # every input error before the progress bars start
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=console) as bar:
         tasks: dict[str, int] = {}
@@ -246,6 +260,8 @@ def build_roadmap_shown(scene: Path, cache_dir: Path, options, jobs: int, consol
             bar.update(tasks[stage], completed=done, total=total)
 
         art, rep = build_roadmap(scene, cache_dir, options, jobs, progress=show)
+    for line in rep.warnings:  # few nodes, a rest configuration in collision: loud, on stderr
+        click.echo(f"warning: {line}", err=True)
     t = Table(title=f"Roadmap ({'tree' if options.tree else 'graph'} mode, {options.nodes} nodes per elementary "
                     "roadmap)")
     t.add_column("what")
@@ -275,7 +291,7 @@ def show_roadmap(file: Path, scene: Path | None, cache_dir: Path, console: Conso
     prov = read_provenance(file)
     expected = None
     if scene is not None:
-        problem = load_problem(scene, cache_dir)
+        problem = load_problem_shown(scene, cache_dir)
         with h5py.File(file, "r") as f:
             options = RoadmapOptions(**json.loads(f.attrs["options"]))
         expected = provenance(problem, options)

@@ -84,11 +84,11 @@ def run_grasps_png(file: Path, best: int, scene: Path, cache_dir: Path, png: Pat
     import h5py
 
     from regrasp_cli.grasp.build import provenance, read_grasp_list, stored_options
-    from regrasp_cli.scene import load_problem
+    from regrasp_cli.commands.progress import load_problem_shown
     from regrasp_cli.show.png import grasps_png
     from regrasp_cli.store import atomic_write_bytes
 
-    problem = load_problem(scene, cache_dir)
+    problem = load_problem_shown(scene, cache_dir)
     try:
         with h5py.File(file, "r") as f:
             hand = str(f.attrs["hand"])

@@ -15,7 +15,6 @@ is kept.  The result is deterministic for a given seed whatever the number of jo
 
 from __future__ import annotations
 
-import re
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -26,6 +25,7 @@ import numpy as np
 from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.jaw import Jaw, antipodal_pairs, jaw_frames, jaw_geometry, jaw_grasp
+from regrasp_cli.grasp.pads import PadHand, pad_frames, pad_geometry, pad_grasp
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
@@ -34,7 +34,8 @@ from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.parallel import ordered_map
 from regrasp_cli.scene import Problem, load_problem
 from regrasp_cli.spatial import rotation_angle
-from regrasp_cli.store import Provenance, canonical_json, read_artefact, sha256_params, write_artefact
+from regrasp_cli.store import (Provenance, canonical_json, file_label, read_artefact, robot_identity, sha256_params,
+                               write_artefact)
 
 FORMAT, FORMAT_VERSION = "regrasp.grasps", 1
 CHUNK = 256  # frames per work item; the target is checked after each
@@ -96,9 +97,11 @@ def provenance(problem: Problem, hand: str, options: BuildOptions) -> Provenance
 
 
 def artefact_path(cache_dir: Path, problem: Problem, hand: str, options: BuildOptions) -> Path:
-    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", problem.object.name.replace("builtin:", "builtin_"))
+    """``grasps/<object>-<robot identity>-<hand>-<10 hex digits of the build parameters>.h5``:
+    two robots sharing a cache never overwrite each other's lists."""
+    name = file_label(problem.object.name.replace("builtin:", "builtin_"))
     key = provenance(problem, hand, options).inputs["params"][:10]
-    return Path(cache_dir) / "grasps" / f"{name}-{hand}-{key}.h5"
+    return Path(cache_dir) / "grasps" / f"{name}-{robot_identity(problem.robot)}-{hand}-{key}.h5"
 
 
 # ------------------------------------------------------------------ per-process work
@@ -109,7 +112,7 @@ class _Search(NamedTuple):
 
     problem: Problem
     surface: Surface
-    workspaces: tuple[FingerWorkspace, ...] | Jaw  # per finger; a jaw's geometry instead
+    workspaces: tuple[FingerWorkspace, ...] | Jaw | PadHand  # per finger; a jaw's or pad hand's geometry instead
     hand_model: HandModel
     rho: float  # m: torque scale (half the object's bounding-box diagonal)
     frames: np.ndarray  # (n, 4, 4) candidate grasp frames X_OG
@@ -126,6 +129,10 @@ def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> 
     surface = build_surface(problem.object.mesh, sampling_step(tip_radius), rng)
     hm = HandModel(robot, hand, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance)
     rho = float(np.linalg.norm(problem.object.extents) / 2)
+    if robot.hands[hand].kind == "pads":
+        pads = pad_geometry(hm)
+        frames = pad_frames(pads, problem.object.mesh, surface, options.grasp.antipodal_samples, rng)
+        return _Search(problem, surface, pads, hm, rho, frames, options)
     if robot.hands[hand].kind == "jaw":
         geometry = jaw_geometry(hm)
         pairs = antipodal_pairs(problem.object.mesh, surface, problem.spec.object.friction,
@@ -144,6 +151,8 @@ def _run_chunk(context: _Search, indices: np.ndarray):
     for i in indices:
         if isinstance(ws, Jaw):
             g, st = jaw_grasp(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
+        elif isinstance(ws, PadHand):
+            g, st = pad_grasp(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
         else:
             g, st = grasp_for_frame(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
         for k, v in st.items():
@@ -176,8 +185,8 @@ def remove_duplicates(grasps: list[Grasp], distance: float, angle: float) -> lis
 
 def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
                  progress=None) -> tuple[GraspList, BuildReport]:
-    """Compute and store the grasp list of ``hand``; ``progress(done, total, kept)`` is
-    called after each wave of frames."""
+    """Compute and store the grasp list of ``hand`` (not stored when empty);
+    ``progress(done, total, kept)`` is called after each wave of frames."""
     scene, cache_dir = Path(scene).resolve(), Path(cache_dir).resolve()
     cache_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -194,7 +203,7 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     # set and the result does not depend on the number of jobs.  The workers are forked
     # once, after the context above is built, so they inherit it instead of rebuilding it
     # (about 1 s each); chunks still in flight when the target is reached are dropped.
-    jaw = isinstance(context.workspaces, Jaw)  # its frames come in random order already
+    jaw = isinstance(context.workspaces, (Jaw, PadHand))  # their frames come in random order already
     order = np.arange(n) if jaw else _frame_order(n // options.grasp.n_orientations, options.grasp.n_orientations)
     chunks = [order[i:i + CHUNK] for i in range(0, n, CHUNK)]
     outputs = ordered_map(_run_chunk, chunks, options.jobs, context)
@@ -218,7 +227,8 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
             stats[k] = stats.get(k, 0) + v
     glist = _to_list(problem, hand, kept)
     path = artefact_path(cache_dir, problem, hand, options)
-    write_grasp_list(path, provenance(problem, hand, options), glist, options)
+    if kept:  # an empty list is never written: the caller says why (artefacts.build_grasp_list)
+        write_grasp_list(path, provenance(problem, hand, options), glist, options)
     t_write = time.perf_counter() - t2
 
     tested = len(grasps) + stats.get("not_force_closure", 0)

@@ -41,6 +41,7 @@ from regrasp_cli.spatial import inverse
 
 CONTACT_GAP = 1e-4  # m: a pad this close to the object touches it
 ADVANCE_ITERATIONS = 60
+NEAR_BOX = 0.005  # m: points this close to a mesh's bounding box get their exact distance
 
 
 @dataclass(frozen=True)
@@ -248,7 +249,8 @@ def close_jaw(hm: HandModel, jaw: Jaw, X_OG: np.ndarray) -> tuple[np.ndarray, np
 def outside_distance(geometry, grow: float, local: np.ndarray) -> np.ndarray:
     """Distance (k,) from points ``local`` (k, 3), in a geometry's own frame, to the
     geometry grown by ``grow`` (0 inside): exact for boxes, cylinders, spheres and
-    capsules, the local bounding box for any other shape."""
+    capsules; for any other shape the distance to its surface (by coal) where the local
+    bounding box is within ``NEAR_BOX``, the bounding box's beyond."""
     if isinstance(geometry, coal.Sphere):
         return np.maximum(np.linalg.norm(local, axis=1) - geometry.radius - grow, 0.0)
     if isinstance(geometry, coal.Cylinder):
@@ -259,11 +261,17 @@ def outside_distance(geometry, grow: float, local: np.ndarray) -> np.ndarray:
         return np.maximum(np.linalg.norm(local - np.c_[0 * z, 0 * z, z], axis=1) - geometry.radius - grow, 0.0)
     if isinstance(geometry, coal.Box):
         half = np.asarray(geometry.halfSide) + grow
-    else:
-        geometry.computeLocalAABB()
-        lo, hi = np.asarray(geometry.aabb_local.min_) - grow, np.asarray(geometry.aabb_local.max_) + grow
-        local, half = local - (lo + hi) / 2, (hi - lo) / 2
-    return np.linalg.norm(np.maximum(np.abs(local) - half, 0.0), axis=1)
+        return np.linalg.norm(np.maximum(np.abs(local) - half, 0.0), axis=1)
+    geometry.computeLocalAABB()
+    lo, hi = np.asarray(geometry.aabb_local.min_) - grow, np.asarray(geometry.aabb_local.max_) + grow
+    d = np.linalg.norm(np.maximum(np.abs(local - (lo + hi) / 2) - (hi - lo) / 2, 0.0), axis=1)
+    # a mesh: coal's distance to its surface, for the points its bounding box cannot rule out
+    point, I = coal.Sphere(1e-9), coal.Transform3s()
+    for k in np.flatnonzero(d < NEAR_BOX):
+        r = coal.DistanceResult()
+        coal.distance(geometry, I, point, coal.Transform3s(np.eye(3), local[k]), coal.DistanceRequest(), r)
+        d[k] = max(r.min_distance - grow, 0.0)
+    return d
 
 
 def contact_patch(surface: Surface, w: np.ndarray, closing: np.ndarray, pads: list[tuple[np.ndarray, object, float]],

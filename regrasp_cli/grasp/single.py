@@ -1,8 +1,8 @@
 """Single grasps of one hand for one grasp frame: Saut et al. 2010, §IV-A-2 and §IV-A-3.
 
 For a grasp frame X_OG (hand grasp frame G in the object frame O) the grasp is built
-finger by finger, in robot.yaml order (the thumb first: no stable grasp exists without
-it).  For finger i, its workspace spheres (biggest first, :mod:`.workspace`) are
+finger by finger, the opposing finger (robot.yaml's ``opposing``, the thumb) first: no
+stable grasp exists without it; then the others in robot.yaml order.  For finger i, its workspace spheres (biggest first, :mod:`.workspace`) are
 intersected with the object's surface kd-tree; each surface point found is a contact
 candidate if its outward normal faces the finger (towards the finger's first joint),
 finger IK puts the fingertip-sphere centre at ``p + r_tip n`` (seeded from the nearest
@@ -234,10 +234,11 @@ def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surf
     points, normals = np.full((n_f, 3), np.nan), np.full((n_f, 3), np.nan)
     axes = np.zeros((n_f, 3))
     placed: set[int] = set()
-    for f, ws in enumerate(workspaces):
-        idx, tip = h.finger_idx[f], h.tip_frames[f]
+    thumb = h.opposing
+    for f in [thumb] + [f for f in range(n_f) if f != thumb]:
+        ws, idx, tip = workspaces[f], h.finger_idx[f], h.tip_frames[f]
         r_tip = h.spec.fingers[f].tip_radius
-        anchor = (points[0], normals[0]) if placed else None  # the thumb's contact
+        anchor = (points[thumb], normals[thumb]) if placed else None  # the thumb's contact
         p, n, near = _candidates(ws, voxels[f], surface, p_G, X_OG, r_tip, anchor,
                                  options.candidates_per_finger)
         stats["contacts"] += len(p)
@@ -260,7 +261,7 @@ def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surf
             J = pin.getFrameJacobian(robot.model, hm.data, tip, pin.LOCAL_WORLD_ALIGNED)[:3, robot._idx_q[idx]]
             axes[f] = X_OG[:3, :3] @ (X_WG[:3, :3].T @ force_ellipsoid_axis(J))
             break
-        if f == 0 and not in_contact[0]:  # the thumb: no stable grasp without it (§IV-A-2)
+        if f == thumb and not in_contact[thumb]:  # no stable grasp without the thumb (§IV-A-2)
             stats["few_contacts"] = 1
             return None, stats
     need = 2 if h.spec.contact == "soft" else 3

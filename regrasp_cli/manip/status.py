@@ -1,6 +1,9 @@
 """Where a planning run stopped: one enum for the planner, the plan JSON
 (``failure.stage``), the CLI's message and the benchmark records.
 
+An empty grasp list is ``Stage.GRASPS`` ("the right hand's grasp list is empty: ..."),
+an empty roadmap ``Stage.ROADMAP``, both with the reason the build found.
+
 A failing transition (a transit or transfer that found no path) is ``Stage.TRANSITION``,
 with the task's label of that transition in ``PlanningFailed.transition`` (for seed 000's
 hand-over: grasp, carry, place or rest).
@@ -18,6 +21,7 @@ class Stage(str, Enum):
     GRASPS = "grasps"  # no grasp configurations at the object's placements (§IV-B double grasps)
     KEYS = "key configurations"  # no configuration where the transitions meet (e.g. the exchange)
     TRANSITION = "transition"  # a transit or transfer found no path
+    ROADMAP = "roadmap"  # the offline roadmap the planner needs has no node (the build says why)
     VALIDATION = "validation"  # the written plan fails the independent validator
     # outcomes of a benchmark run that never reached the planner's answer
     BUDGET = "budget"

@@ -27,6 +27,7 @@ import pinocchio as pin
 
 from regrasp_cli.config import HandSpec, RobotSpec, load_robot_spec
 from regrasp_cli.errors import InputError
+from regrasp_cli.spatial import pose_matrix
 from regrasp_cli.store import sha256_file
 
 GROUP_NAMES = ("torso", "right_arm", "left_arm")
@@ -60,7 +61,8 @@ class Hand:
     tip_frames: tuple[int, ...]  # per finger, pinocchio frame id of the tip link
     grasp_frame: int  # pinocchio frame id of the grasp frame G
     open: np.ndarray  # (n_hand_joints,) open configuration, in the order of ``idx``
-    kind: str = "fingertips"  # "fingertips" or "jaw": how its grasps are found (HandSpec.kind)
+    kind: str = "fingertips"  # "fingertips", "jaw" or "pads": how its grasps are found (HandSpec.kind)
+    opposing: int = 0  # index of the finger opposing the others (HandSpec.opposing; the first when unstated)
 
     @property
     def side(self) -> str:
@@ -147,6 +149,8 @@ class Robot:
     def frame_id(self, name: str, field: str = "link") -> int:
         if not self.model.existFrame(name):
             raise InputError(self.spec.file, field, f"unknown link or frame {name!r} in {self.spec.urdf.name}")
+        if self.model.existFrame(name, pin.FrameType.BODY):  # a link named like a joint: the link
+            return self.model.getFrameId(name, pin.FrameType.BODY)
         return self.model.getFrameId(name)
 
     def _hand(self, h: HandSpec) -> Hand:
@@ -168,8 +172,28 @@ class Robot:
                 raise InputError(self.spec.file, f"{where}.fingers",
                                  f"open value {open_[k[0]]} of joint {self.joint_names[f]} does not follow its URDF "
                                  f"mimic of {self.joint_names[o[0]]} (expected {o[1] * open_[lead[0]] + o[2]:g})")
-        return Hand(h, self.groups[h.arm], finger_idx, tips, self.frame_id(h.grasp_frame, f"{where}.grasp_frame"),
-                    open_, self._hand_kind(h, finger_idx))
+        opposing = 0 if h.opposing is None else [f.name for f in h.fingers].index(h.opposing)
+        for i, f in enumerate(h.fingers):
+            c = np.array(f.closed if f.closed is not None else f.open)
+            lo, hi = self.lower[finger_idx[i]], self.upper[finger_idx[i]]
+            if np.any(c < lo - 1e-9) or np.any(c > hi + 1e-9):
+                limits = ", ".join(f"{a:.4g}..{b:.4g}" for a, b in zip(lo, hi))
+                raise InputError(self.spec.file, f"{where}.fingers[{i}].closed",
+                                 f"expected values within the joint limits ({limits}), found {c.tolist()}")
+        return Hand(h, self.groups[h.arm], finger_idx, tips, self._grasp_frame(h), open_,
+                    self._hand_kind(h, finger_idx), opposing)
+
+    def _grasp_frame(self, h: HandSpec) -> int:
+        """The frame id of the hand's grasp frame: the named link, or a frame added at the
+        stated offset from it."""
+        field = f"hands.{h.side}.grasp_frame" + ("" if h.grasp_offset is None else ".link")
+        parent = self.frame_id(h.grasp_frame, field)
+        if h.grasp_offset is None:
+            return parent
+        f = self.model.frames[parent]
+        X = f.placement * pin.SE3(pose_matrix(*h.grasp_offset))
+        name = f"regrasp_{h.side}_grasp_frame"
+        return self.model.addFrame(pin.Frame(name, f.parentJoint, parent, X, pin.FrameType.OP_FRAME))
 
     def _hand_kind(self, h: HandSpec, finger_idx: tuple[np.ndarray, ...]) -> str:
         """``jaw`` for two fingers of one prismatic joint each, else ``fingertips``
@@ -178,7 +202,13 @@ class Robot:
         if h.kind == "jaw" and not jaw:
             raise InputError(self.spec.file, f"hands.{h.side}.kind",
                              "a jaw needs two fingers of one prismatic joint each")
-        return ("jaw" if jaw else "fingertips") if h.kind == "auto" else h.kind
+        few = any(len(i) < 3 for i in finger_idx)
+        kind = ("jaw" if jaw else "pads" if few else "fingertips") if h.kind == "auto" else h.kind
+        if kind == "fingertips" and len(finger_idx) > 2 and h.opposing is None:
+            raise InputError(self.spec.file, f"hands.{h.side}.opposing",
+                             "missing: name the finger that opposes the others (the thumb), e.g. "
+                             f"opposing: {h.fingers[0].name}")
+        return kind
 
     def configuration(self, values: Mapping[str, float], field: str, base: np.ndarray | None = None) -> np.ndarray:
         """A full configuration from ``joint -> value`` (others from ``base``, default rest),

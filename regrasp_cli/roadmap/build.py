@@ -6,6 +6,11 @@ nodes, then its edges (in parallel over forked workers, in a fixed order, so the
 does not depend on the number of jobs).  The roadmap depends on the robot (URDF,
 robot.yaml), the static obstacles and the options, not on the object: its provenance
 hashes exactly those.
+
+No silent emptiness: an elementary roadmap or a Super Graph without a node is an
+:class:`~regrasp_cli.errors.EmptyRoadmap` (nothing written) naming the pairs that rejected
+most samples (:mod:`.rejections`); one with fewer than a fifth of the nodes asked for, or a
+rest configuration in collision, a warning in the :class:`BuildReport`.
 """
 
 from __future__ import annotations
@@ -19,17 +24,18 @@ import networkx as nx
 import numpy as np
 
 from regrasp_cli.config import ObstacleSpec
-from regrasp_cli.errors import InputError
+from regrasp_cli.errors import EmptyRoadmap, InputError
 from regrasp_cli.model.collision import CollisionWorld, collision_world
 from regrasp_cli.parallel import ordered_map
 from regrasp_cli.roadmap.compose import (LEFT, RIGHT, SuperGraph, UnionFind, candidate_edges, compose_nodes,
                                          edge_kind, involving, link_parts, margin_rule, mixed, part_filter,
                                          subsystem)
 from regrasp_cli.motion.local import LocalPlanner, distance, joint_reach, joint_weights
+from regrasp_cli.roadmap.rejections import FEW, Rejections, pairs_text, tallied
 from regrasp_cli.roadmap.visprm import Roadmap, VisPRMOptions, visibility_prm
 from regrasp_cli.scene import Problem, load_problem
-from regrasp_cli.store import Provenance, canonical_json, read_artefact, read_provenance, sha256_file, \
-    sha256_params, write_artefact
+from regrasp_cli.store import Provenance, canonical_json, read_artefact, read_provenance, robot_identity, \
+    sha256_file, sha256_params, write_artefact
 
 FORMAT, FORMAT_VERSION = "regrasp.roadmap", 1
 EDGE_CHUNK = 64
@@ -71,6 +77,7 @@ class BuildReport:
     path: Path
     rows: dict[str, str]  # summary table rows
     seconds: dict[str, float]
+    warnings: tuple[str, ...] = ()  # few nodes, a rest configuration in collision: one line each
 
 
 # ------------------------------------------------------------------ provenance
@@ -90,8 +97,9 @@ def provenance(problem: Problem, options: RoadmapOptions) -> Provenance:
 
 
 def artefact_path(cache_dir: Path, problem: Problem, options: RoadmapOptions) -> Path:
+    """``roadmap/<robot identity>-<12 hex digits of the provenance inputs>.h5``."""
     key = sha256_params(dict(provenance(problem, options).inputs))[:12]
-    return Path(cache_dir) / "roadmap" / f"{problem.robot.model.name}-{key}.h5"
+    return Path(cache_dir) / "roadmap" / f"{robot_identity(problem.robot)}-{key}.h5"
 
 
 # ------------------------------------------------------------------ worlds
@@ -143,7 +151,9 @@ def edge_chains(robot) -> tuple[tuple[np.ndarray, ...] | None, ...]:
     return ((np.r_[t, l], np.r_[l, r]), (np.r_[t, r], np.r_[l, r]), None)
 
 
-def _elementary(b: _Build, side: str) -> tuple[Roadmap, int]:
+def _elementary(b: _Build, side: str) -> tuple[Roadmap, int, Rejections]:
+    """The elementary roadmap of torso + ``side`` arm, its collision checks, and what its
+    collision checks rejected."""
     problem, options, planner = b.problem, b.options, b.planner
     robot = problem.robot
     idx = np.concatenate([robot.groups["torso"], robot.groups[f"{side}_arm"]])
@@ -157,14 +167,16 @@ def _elementary(b: _Build, side: str) -> tuple[Roadmap, int]:
         q[idx] = x
         return q
 
+    tally = Rejections()
+    is_free = tallied(world.is_free, world.colliding_pairs, tally)
     roadmap = visibility_prm(
         sample=lambda: rng.uniform(lo, hi),
-        is_free=lambda x: world.is_free(full(x)),
+        is_free=lambda x: is_free(full(x)),
         segment_free=lambda x0, x1: planner.segment_free(world, full(x0), full(x1)),
         maybe_free=lambda x0, x1: planner.segment_free(world, full(x0), full(x1), limit=PROBE),
         distance=lambda x0, xs: distance(x0, xs, w),
         options=VisPRMOptions(max_nodes=options.nodes, max_failures=options.max_failures))
-    return roadmap, world.n_checks
+    return roadmap, world.n_checks, tally
 
 
 def _edge_worlds(b: _Build) -> tuple[CollisionWorld, ...]:
@@ -232,20 +244,22 @@ def build_roadmap(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: i
     weights = joint_weights(robot)
     planner = LocalPlanner(options.resolution, options.margin, joint_reach(robot))
     b = _Build(problem, worlds, options, weights, planner, edge_chains(robot))
+    rest = problem.world().colliding_pairs(q_base(problem))
+    warnings = [f"the robot's rest configuration (hands open) is in collision: {pairs_text(rest)}; the roadmaps "
+                "hold the joints they do not sample there"] if rest else []
     if progress:
         progress("elementary roadmaps", 0, 2)
-    (right, cr), (left, cl) = list(ordered_map(_elementary, ["right", "left"], min(jobs, 2), b))
+    (right, cr, rej_r), (left, cl, rej_l) = list(ordered_map(_elementary, ["right", "left"], min(jobs, 2), b))
+    warnings += _check_elementary(options, {"right": (right, rej_r), "left": (left, rej_l)}, rest)
     checks = cr + cl
     seconds["elementary roadmaps"] = time.perf_counter() - t0
     if progress:
         progress("elementary roadmaps", 2, 2)
 
     t1 = time.perf_counter()
-    before = worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks
-    nodes, source, tested_nodes = compose_nodes(robot, q_base(problem), right.nodes, left.nodes,
-                                                worlds["node_right_torso"].is_free,
-                                                worlds["node_left_torso"].is_free)
-    checks += worlds["node_right_torso"].n_checks + worlds["node_left_torso"].n_checks - before
+    nodes, source, tested_nodes, n, few = _super_graph_nodes(b, right, left, rest)
+    checks += n
+    warnings += few
     seconds["Super Graph nodes"] = time.perf_counter() - t1
 
     t2 = time.perf_counter()
@@ -269,7 +283,47 @@ def build_roadmap(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: i
     rows["collision checks"] = f"{checks:,}"
     total = sum(seconds.values())
     rows["collision checks / s"] = f"{checks / max(total, 1e-9):,.0f}"
-    return art, BuildReport(path, rows, seconds)
+    return art, BuildReport(path, rows, seconds, tuple(warnings))
+
+
+def _rest_note(rest: list[tuple[str, str]]) -> str:
+    return (f"; the rest configuration (hands open), where the roadmaps hold the joints they do not sample, is in "
+            f"collision: {pairs_text(rest)}") if rest else ""
+
+
+def _check_elementary(options: RoadmapOptions, roadmaps: dict[str, tuple[Roadmap, Rejections]],
+                         rest: list[tuple[str, str]]) -> list[str]:
+    """Raises EmptyRoadmap when an elementary roadmap has no node, naming the pairs that
+    rejected most samples (and ``rest``, the colliding pairs of the rest configuration);
+    returns a warning per roadmap with fewer than :data:`FEW` of the nodes asked for."""
+    what = f"samples collide or come within {1000 * options.margin:g} mm"
+    empty, few = [], []
+    for side, (rm, tally) in roadmaps.items():
+        name = f"R_{side[0]} (torso + {side} arm)"
+        if len(rm.nodes) == 0:
+            empty.append(f"{name} has no node: {tally.describe(what)}")
+        elif len(rm.nodes) < FEW * options.nodes:
+            few.append(f"{name} has only {len(rm.nodes)} of the {options.nodes} nodes asked for: "
+                       f"{tally.describe(what)}")
+    if empty:
+        raise EmptyRoadmap("the roadmap is empty: " + "; ".join(empty) + _rest_note(rest))
+    return few
+
+
+def _super_graph_nodes(b: _Build, right: Roadmap, left: Roadmap, rest: list[tuple[str, str]]):
+    """Super Graph nodes (m, nq), their sources (m, 3), the candidates tested, the
+    collision checks made, and a warning when fewer than :data:`FEW` of the candidates
+    are free; raises EmptyRoadmap when none is."""
+    wr, wl = b.worlds["node_right_torso"], b.worlds["node_left_torso"]
+    before, tally = wr.n_checks + wl.n_checks, Rejections()
+    nodes, source, tested = compose_nodes(b.problem.robot, q_base(b.problem), right.nodes, left.nodes,
+                                          tallied(wr.is_free, wr.colliding_pairs, tally),
+                                          tallied(wl.is_free, wl.colliding_pairs, tally))
+    what = f"combinations of elementary nodes collide or come within {1000 * b.options.margin:g} mm"
+    if len(nodes) == 0:
+        raise EmptyRoadmap(f"the roadmap is empty: no Super Graph node: {tally.describe(what)}{_rest_note(rest)}")
+    few = [f"the Super Graph has only {len(nodes)} nodes: {tally.describe(what)}"] if len(nodes) < FEW * tested else []
+    return nodes, source, tested, wr.n_checks + wl.n_checks - before, few
 
 
 def summary(art: RoadmapArtefact) -> dict[str, str]:

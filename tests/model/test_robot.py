@@ -228,3 +228,58 @@ def test_sample_is_within_limits_and_keeps_other_joints(robot):
 def test_fk_of_unknown_frame(robot):
     with pytest.raises(InputError):
         Kinematics(robot).fk(robot.q_rest, "no_such_link")
+
+
+# ---------------------------------------------------------------- robot.yaml for real robots
+
+HUMANOID = Path(__file__).resolve().parents[2] / "configs" / "robots" / "humanoid43"
+
+
+def _humanoid_yaml(tmp_path: Path, edit) -> Path:
+    """A copy of the default robot.yaml (its URDF referenced by absolute path), edited."""
+    data = yaml.safe_load((HUMANOID / "robot.yaml").read_text())
+    data["urdf"] = str(HUMANOID / "robot.urdf")
+    edit(data)
+    path = tmp_path / "robot.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_grasp_frame_as_link_and_offset_matches_the_urdf_frame(robot, tmp_path):
+    """r_grasp_frame is a URDF link fixed to r_palm at xyz (0.135, 0, 0.065); given in
+    robot.yaml as r_palm plus that offset (and with a turn about z, as a rotated frame
+    added to the URDF would be), the grasp frame lands on the same pose."""
+    def edit(d):
+        d["hands"]["right"]["grasp_frame"] = {"link": "r_palm", "xyz": [0.135, 0, 0.065], "rpy": [0, 0, 0.5]}
+    other = load_robot(_humanoid_yaml(tmp_path, edit))
+    kin, kin2 = Kinematics(robot), Kinematics(other)
+    turn = np.eye(4)
+    turn[:3, :3] = rz(0.5)
+    for q in (robot.q_rest, robot.sample(np.random.default_rng(3))):
+        X = kin.fk(q, robot.hands["right"].grasp_frame) @ turn
+        assert np.allclose(kin2.fk(q, other.hands["right"].grasp_frame), X, atol=1e-12)
+    # the left hand, given as a plain link, is untouched
+    assert other.hands["left"].grasp_frame == robot.hands["left"].grasp_frame
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda d: d["hands"]["right"].update(grasp_frame={"link": "no_such_link"}), "hands.right.grasp_frame.link"),
+    (lambda d: d["hands"]["right"].update(grasp_frame={"link": "r_palm", "xyz": [0, 0]}), "hands.right.grasp_frame.xyz"),
+    (lambda d: d["hands"]["right"].update(grasp_frame={"link": "r_palm", "rot": [0, 0, 0]}), "hands.right.grasp_frame.rot"),
+    (lambda d: d["hands"]["right"].update(opposing="pinky"), "hands.right.opposing"),
+    (lambda d: d["hands"]["right"].pop("opposing"), "hands.right.opposing"),
+])
+def test_bad_grasp_frame_or_opposing_finger_is_named(tmp_path, edit, field):
+    with pytest.raises(InputError) as e:
+        load_robot(_humanoid_yaml(tmp_path, edit))
+    assert field in str(e.value)
+
+
+def test_opposing_finger_is_stated_not_the_first(robot, tmp_path):
+    """Listing the thumb last changes nothing once ``opposing`` names it."""
+    def edit(d):
+        d["hands"]["right"]["fingers"] = d["hands"]["right"]["fingers"][1:] + d["hands"]["right"]["fingers"][:1]
+    other = load_robot(_humanoid_yaml(tmp_path, edit))
+    h = other.hands["right"]
+    assert h.spec.fingers[h.opposing].name == "thumb" and h.opposing == 3
+    assert robot.hands["right"].opposing == 0

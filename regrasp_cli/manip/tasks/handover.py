@@ -188,6 +188,11 @@ def choose_hands(scratch: Scratch, lists: dict[str, GraspList], seed: int) -> tu
     """The picking hand and its double grasps: the hand nearer the start first, the
     other when it cannot.  Raises _Failed (Stage.GRASPS) when neither can."""
     problem = scratch.problem
+    for h in ("right", "left"):
+        if len(lists[h]) == 0:  # say so, not "0 of 0 grasps clear the obstacles"
+            raise _Failed(PlanningFailed(Stage.GRASPS, f"the {h} hand's grasp list is empty: no grasp of the object "
+                                                       f"was found for it (`regrasp grasps build --hand {h}` says "
+                                                       "why)"), {}, {})
     env = static_geometry(problem.spec.obstacles)
     shapes = {h: hand_shapes(problem.robot, h, lists[h].finger_q) for h in ("right", "left")}
     guess = picking_hand(problem, scratch)
@@ -330,6 +335,33 @@ def _checks(scratch: Scratch, counts: dict) -> int:
     return scratch.checks + (workers if scratch.options.jobs > 1 else 0)
 
 
+def _ends(problem: Problem) -> list[tuple[np.ndarray, np.ndarray, str]]:
+    task = problem.spec.task
+    return [(problem.q_start, task.X_WO_start, "start"), (problem.q_goal, task.X_WO_goal, "goal")]
+
+
+def _placements(problem: Problem) -> dict[str, np.ndarray]:
+    task = problem.spec.task
+    return {"start": task.X_WO_start, "goal": task.X_WO_goal}
+
+
+def ends_failure(problem: Problem, options: OnlineOptions) -> PlanningFailed | None:
+    """Why the robot's start or goal configuration cannot be planned from (in collision,
+    naming the pairs, or without the queries' clearance), or None: the check :func:`plan`
+    starts with, for callers to make before loading or building any artefact."""
+    try:
+        check_ends(Scratch(problem, options), _ends(problem))
+    except PlanningFailed as exc:
+        return exc
+    return None
+
+
+def failed(problem: Problem, failure: PlanningFailed) -> Outcome:
+    """The outcome of a run that failed before planning (its ends, an empty grasp list or
+    roadmap): no phases, the task's placements."""
+    return Outcome(TASK, placements=_placements(problem), stages=dict.fromkeys(STAGES, 0.0), failure=failure)
+
+
 def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
          seed: int) -> Outcome:
     """Plan the pick, hand-over and place; a failure is the Outcome's ``failure``."""
@@ -337,12 +369,11 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     weights = roadmap.weights if roadmap is not None else joint_weights(problem.robot)
     if options.planner == "ompl-rrtconnect":
         ompl_version()  # InputError now, not after the key configurations, when the extra is missing
-    task = problem.spec.task
-    placements = {"start": task.X_WO_start, "goal": task.X_WO_goal}
+    placements = _placements(problem)
     clock, counts, table = dict.fromkeys(STAGES, 0.0), {}, {}
     t0 = time.perf_counter()
     try:
-        check_ends(scratch, [(problem.q_start, task.X_WO_start, "start"), (problem.q_goal, task.X_WO_goal, "goal")])
+        check_ends(scratch, _ends(problem))
         try:
             g, doubles, c = choose_hands(scratch, lists, seed)
             counts.update(c)
