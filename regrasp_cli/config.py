@@ -270,6 +270,7 @@ class RobotSpec:
     self_collision: SelfCollisionOptions = field(default_factory=SelfCollisionOptions)
     srdf: Path | None = None  # a MoveIt SRDF whose disable_collisions pairs are added
     srdf_disabled: tuple[tuple[str, str], ...] = ()
+    convex_hulls: bool = True  # mesh collision geometries replaced by their convex hulls
 
 
 def _find_package_share(package: str) -> list[Path]:
@@ -303,7 +304,8 @@ def resolve_urdf(file: Path, where: str, value: str) -> tuple[Path, tuple[Path, 
 def load_robot_spec(path: str | Path) -> RobotSpec:
     file, data = read_yaml(path)
     f = Fields(file, data)
-    f.only("format", "urdf", "srdf", "groups", "hands", "rest", "disabled_collisions", "self_collision")
+    f.only("format", "urdf", "srdf", "groups", "hands", "rest", "disabled_collisions", "self_collision",
+           "convex_hulls")
     if f.str("format") != ROBOT_FORMAT:
         raise f.error("format", f"expected '{ROBOT_FORMAT}', found {f.data['format']!r}")
     urdf, package_dirs = resolve_urdf(file, "urdf", f.str("urdf"))
@@ -347,7 +349,10 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     if f.has("srdf"):
         srdf, _ = resolve_urdf(file, "srdf", f.str("srdf"))
         srdf_pairs = tuple(_srdf_disabled(srdf, file))
-    return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc, srdf, srdf_pairs)
+    hulls = f.data.get("convex_hulls", True)
+    if not isinstance(hulls, bool):
+        raise f.error("convex_hulls", f"expected true or false, found {hulls!r}")
+    return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc, srdf, srdf_pairs, hulls)
 
 
 def _srdf_disabled(srdf: Path, file: Path) -> list[tuple[str, str]]:

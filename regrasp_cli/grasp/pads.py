@@ -21,8 +21,9 @@ it as it closes.  A grasp is therefore found as a hand is used (GraspIt's "auto-
    that closes fully without touching goes back to open.  An open hand that starts inside the object is first
    backed off along the approach, 1 cm at a time (up to 3 cm).
 3. **Force closure and quality** (:mod:`.quality`) at the contacts found: the middle of
-   the patch of surface under each touching finger (:func:`.jaw.contact_patch`), with the
-   hand's contact model (point or soft), at least 3 point or 2 soft contacts.
+   the patch of surface under each finger's touching link (:func:`.jaw.contact_patch`),
+   or the nearest surface point when that middle is off the link (a patch in pieces),
+   with the hand's contact model (point or soft), at least 3 point or 2 soft contacts.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
-from regrasp_cli.grasp.jaw import CONTACT_GAP, ADVANCE_ITERATIONS, _finger_pairs, _pads, contact_patch
+from regrasp_cli.grasp.jaw import ADVANCE_ITERATIONS, CONTACT_GAP, _finger_pairs, contact_patch, outside_distance
 from regrasp_cli.grasp.quality import grasp_quality
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel
 from regrasp_cli.grasp.surface import Surface
@@ -299,9 +300,15 @@ def pad_grasp(hm: HandModel, pads: PadHand, surface: Surface, X_OG: np.ndarray, 
     for f in np.flatnonzero(touching):
         k = _finger_gap(hm, f)[1]
         w = X_OW[:3, :3] @ pin.computeDistance(hm.gm, hm.gd, k).getNearestPoint2() + X_OW[:3, 3]
-        inward = -surface.normals[surface.tree.query(w)[1]]  # the finger pushes into the surface
-        points[f], normals[f] = contact_patch(surface, w, inward, _pads(hm, f, X_OW))
-        axes[f] = -normals[f]
+        near = surface.tree.query(w)[1]
+        # the patch under the touching link alone (two links of a finger may touch apart)
+        a = hm.gm.collisionPairs[k].first
+        pad = [(X_OW @ hm.gd.oMg[a].homogeneous, hm.gm.geometryObjects[a].geometry, hm.erosion[a])]
+        p, n = contact_patch(surface, w, -surface.normals[near], pad)
+        X, geometry, grow = pad[0]
+        if outside_distance(geometry, grow, ((p - X[:3, 3]) @ X[:3, :3])[None])[0] > PAD_CONTACT:
+            p, n = w, surface.normals[near]  # a patch in pieces (a link around an edge): its middle is off the link
+        points[f], normals[f], axes[f] = p, n, -n
     c = touching
     kappa = surface.curvature[surface.tree.query(points[c])[1]]
     scores = grasp_quality(points[c], normals[c], friction, surface.mass_centre, axes[c], kappa, rho,

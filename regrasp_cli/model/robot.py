@@ -22,8 +22,10 @@ from functools import cached_property
 from pathlib import Path
 from typing import Mapping
 
+import coal
 import numpy as np
 import pinocchio as pin
+import trimesh
 
 from regrasp_cli.config import HandSpec, RobotSpec, load_robot_spec
 from regrasp_cli.errors import InputError
@@ -87,6 +89,8 @@ class Robot:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise InputError(spec.file, "urdf", f"cannot parse URDF {spec.urdf}: {first}") from None
         self.model: pin.Model = model
+        if spec.convex_hulls:
+            _convexify(collision)
         self.collision_model: pin.GeometryModel = collision
         self.visual_model: pin.GeometryModel = visual
 
@@ -272,6 +276,17 @@ class Robot:
     def link_of_geometry(self, gid: int) -> str:
         """Name of the URDF link a collision geometry belongs to."""
         return self.model.frames[self.collision_model.geometryObjects[gid].parentFrame].name
+
+
+def _convexify(gm: pin.GeometryModel) -> None:
+    """Every mesh geometry of ``gm`` replaced by its convex hull (robot.yaml's
+    ``convex_hulls``, on by default): it contains the mesh, so a configuration free with
+    hulls is free with the meshes, and a scanned link of 20,000 triangles becomes a hull
+    of a few hundred points that coal checks 10-50x faster."""
+    for go in gm.geometryObjects:
+        if isinstance(go.geometry, coal.BVHModelBase):
+            hull = trimesh.convex.convex_hull(np.asarray(go.geometry.vertices()))
+            go.geometry = coal.Convex.convexHull(list(hull.vertices), False, None)
 
 
 def _mimic_joints(spec: RobotSpec) -> dict[str, tuple[str, float, float]]:

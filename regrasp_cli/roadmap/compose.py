@@ -29,9 +29,12 @@ Composition is a pure function of the two roadmaps: they are not modified.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Callable
 
+import coal
 import numpy as np
+import pinocchio as pin
 
 from regrasp_cli.model.robot import Robot
 
@@ -71,10 +74,50 @@ def hand_links(robot: Robot) -> set[str]:
 
 def margin_rule(robot: Robot, margin: float) -> Callable[[str, str], float]:
     """Clearance of a pair in the roadmap worlds: ``margin`` unless both links belong to
-    the same open hand (they do not move relative to each other)."""
+    the same open hand (they do not move relative to each other) or are links of one
+    chain closer than ``margin`` already at rest (:func:`close_at_rest`): those are still
+    checked for collision, without a clearance they could never keep."""
     hands = hand_links(robot)
     parts = link_parts(robot)
-    return lambda a, b: 0.0 if (a in hands and b in hands and parts.get(a) == parts.get(b)) else margin
+    close = close_at_rest(robot, margin)
+    return lambda a, b: 0.0 if ((a in hands and b in hands and parts.get(a) == parts.get(b))
+                                or frozenset((a, b)) in close) else margin
+
+
+@lru_cache(maxsize=8)
+def close_at_rest(robot: Robot, margin: float) -> frozenset[frozenset[str]]:
+    """Link pairs on one kinematic chain (one link's joint carries the other) whose
+    collision geometries are closer than ``margin`` (m) at the rest configuration: on a
+    robot with tightly packed scanned links (Unitree G1's elbow and wrist) they are
+    always that close, so a clearance there would reject every configuration."""
+    model, gm = robot.model, robot.collision_model
+    data, gd = model.createData(), pin.GeometryData(gm)
+    pin.updateGeometryPlacements(model, data, gm, gd, robot.to_pin(robot.q_rest))
+    out = set()
+    objs = gm.geometryObjects
+    for a in range(len(objs)):
+        for b in range(a + 1, len(objs)):
+            ja, jb = objs[a].parentJoint, objs[b].parentJoint
+            if ja == jb or not (_carries(model, ja, jb) or _carries(model, jb, ja)):
+                continue
+            la, lb = (model.frames[objs[k].parentFrame].name for k in (a, b))
+            X, Y = gd.oMg[a], gd.oMg[b]
+            d = coal.distance(objs[a].geometry, coal.Transform3s(X.rotation, X.translation), objs[b].geometry,
+                              coal.Transform3s(Y.rotation, Y.translation), coal.DistanceRequest(),
+                              coal.DistanceResult())
+            if d < margin:
+                out.add(frozenset((la, lb)))
+    return frozenset(out)
+
+
+def _carries(model, j: int, k: int) -> bool:
+    """Joint j is a strict ancestor of joint k."""
+    k = model.parents[k]
+    while k > 0:
+        if k == j:
+            return True
+        k = model.parents[k]
+    return j == 0
 
 
 def part_filter(parts: dict[str, str], accept: Callable[[str, str], bool]) -> Callable[[str, str], bool]:

@@ -153,3 +153,28 @@ def test_antipodal_pairs_of_a_box_lie_across_opposite_faces(baxter):
     # only the 4 cm faces fit: the pairs join x = +-2 cm or y = +-2 cm, never the ends
     assert np.allclose(np.linalg.norm(p2 - p1, axis=1), 0.04, atol=0.04 * (1 / cone - 1) + 1e-6)
     assert np.all(np.abs(n1[:, 2]) < 1e-6)
+
+
+def test_validator_measures_a_contact_from_the_pad_surface(baxter):
+    """regrasp validate checks a jaw's contact against the finger's pads (anywhere on
+    them), not a fingertip point: a point 5 mm off a pad box's face reads 5 mm; one on
+    the face reads 0."""
+    import pinocchio as pin
+
+    from regrasp_cli.validate import _finger_distance
+
+    hand = baxter.hands["right"]
+    data = baxter.model.createData()
+    pin.forwardKinematics(baxter.model, data, baxter.to_pin(baxter.q_rest))
+    joint = baxter.model.getJointId(baxter.joint_names[hand.finger_idx[0][0]])
+    box = next(go for go in baxter.collision_model.geometryObjects
+               if go.parentJoint == joint and type(go.geometry).__name__ == "Box")
+    X = (data.oMi[joint] * box.placement).homogeneous
+    half = np.asarray(box.geometry.halfSide)
+    for gap in (0.0, 0.005):
+        p_W = X[:3, :3] @ np.array([half[0] + gap, 0.0, 0.0]) + X[:3, 3]
+        d = _finger_distance(baxter, hand, 0, baxter.q_rest, p_W)
+        if gap == 0.0:
+            assert d < 1e-6
+        else:  # at most the gap (another geometry of the finger could be nearer), never on it
+            assert 1e-3 < d <= gap + 1e-6

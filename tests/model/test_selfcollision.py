@@ -176,7 +176,7 @@ def test_sphere_cover_holds_the_mesh_triangles(tmp_path):
             for t in ((v[i][j], v[i + 1][j], v[i + 1][j + 1]), (v[i][j], v[i + 1][j + 1], v[i][j + 1]))]
     mesh = tmp_path / "grid.stl"
     mesh.write_text(_stl(grid))
-    robot = tiny_robot(tmp_path, f'<mesh filename="{mesh}"/>')
+    robot = tiny_robot(tmp_path, f'<mesh filename="{mesh}"/>', convex_hulls=False)  # the mesh itself
     geom = next(g.geometry for g in robot.collision_model.geometryObjects if isinstance(g.geometry, coal.BVHModelBase))
     assert geom.num_tris == 200 and len(sphere_cover(geom)[1]) == 8
     rng = np.random.default_rng(0)
@@ -229,6 +229,7 @@ def test_cache_key_follows_urdf_meshes_and_options(tmp_path):
     assert cache_key(tiny_robot(tmp_path, geometry)) != key
     assert cache_key(tiny_robot(tmp_path, '<sphere radius="0.06"/>')) != cache_key(tiny_robot(tmp_path))
     assert cache_key(tiny_robot(tmp_path, samples=51)) != cache_key(tiny_robot(tmp_path))
+    assert cache_key(tiny_robot(tmp_path, geometry, convex_hulls=False)) != key  # the meshes, not their hulls
 
 
 def test_cache_is_shared_by_robots_differing_in_rest_and_gets_user_pairs(tmp_path, monkeypatch):
