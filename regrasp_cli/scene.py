@@ -11,12 +11,13 @@ from pathlib import Path
 
 import numpy as np
 
-from regrasp_cli.config import SceneSpec, load_scene_spec
+from regrasp_cli.config import ObstacleSpec, SceneSpec, load_scene_spec
 from regrasp_cli.errors import InputError
 from regrasp_cli.model.collision import CollisionOptions, CollisionWorld, ObjectPlacement, collision_world
 from regrasp_cli.model.objects import ObjectMesh, load_object_mesh
 from regrasp_cli.model.robot import Robot, load_robot
 from regrasp_cli.model.selfcollision import DisabledPairs, PairProgress, disabled_pairs
+from regrasp_cli.store import sha256_file, sha256_params
 
 
 @dataclass(frozen=True)
@@ -71,3 +72,10 @@ def load_problem(path: str | Path, cache_dir: Path | None, progress: PairProgres
             except InputError as exc:
                 raise InputError(spec.file, exc.field, exc.message) from None
     return Problem(spec, robot, obj, disabled_pairs(robot, cache_dir, progress), q["robot_start"], q["robot_goal"])
+
+
+def obstacles_sha256(obstacles: tuple[ObstacleSpec, ...]) -> str:
+    """SHA-256 of the obstacles as the planner sees them (names, shapes, sizes, poses, mesh files)."""
+    items = [{"name": o.name, "shape": o.shape, "size": list(o.size), "pose": np.round(o.X_WO, 12).tolist(),
+              "mesh": sha256_file(o.mesh) if o.mesh is not None else None} for o in obstacles]
+    return sha256_params(items)

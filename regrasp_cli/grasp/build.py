@@ -26,13 +26,14 @@ from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.jaw import Jaw, antipodal_pairs, jaw_frames, jaw_geometry, jaw_grasp
 from regrasp_cli.grasp.pads import PadHand, pad_frames, pad_geometry, pad_grasp
+from regrasp_cli.model.handshape import hand_hits_static, hand_shapes, static_geometry
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
 from regrasp_cli.grasp.workspace import FingerWorkspace, WorkspaceOptions, hand_workspace
 from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.parallel import ordered_map
-from regrasp_cli.scene import Problem, load_problem
+from regrasp_cli.scene import Problem, load_problem, obstacles_sha256
 from regrasp_cli.spatial import rotation_angle
 from regrasp_cli.store import (Provenance, canonical_json, file_label, read_artefact, robot_identity, sha256_params,
                                write_artefact)
@@ -84,9 +85,34 @@ class BuildReport:
 
 
 def _params(problem: Problem, hand: str, options: BuildOptions) -> dict:
+    task = problem.spec.task
     return {"hand": hand, "friction": problem.spec.object.friction, "seed": options.seed,
             "contact_tolerance": problem.spec.planning.contact_tolerance,
-            "grasp": asdict(options.grasp), "workspace": asdict(options.workspace)}
+            "grasp": asdict(options.grasp), "workspace": asdict(options.workspace),
+            # the list keeps the grasps usable at the task's object poses (_Usable)
+            "usable_at": {"obstacles": obstacles_sha256(problem.spec.obstacles),
+                          "poses": np.round([task.X_WO_start, task.X_WO_goal], 9).tolist()}}
+
+
+class _Usable:
+    """Is a grasp usable in the scene's task: does the hand alone, at the grasp, clear the
+    obstacles with the object at its start pose or at its goal pose (where a hand picks
+    or places it)?  A grasp from under the object goes through its support at both, and
+    no planner can use it (the double-grasp filter, :mod:`manip.doublegrasp`, would drop
+    it): the list is filled with usable grasps instead, so its target counts what
+    matters.  Memoised per grasp frame."""
+
+    def __init__(self, problem: Problem, hand: str):
+        self.robot, self.hand = problem.robot, hand
+        self.env = static_geometry(problem.spec.obstacles)
+        self.poses = (problem.spec.task.X_WO_start, problem.spec.task.X_WO_goal)
+        self.memo: dict[int, bool] = {}
+
+    def __call__(self, g: Grasp) -> bool:
+        if g.frame_index not in self.memo:
+            shape = hand_shapes(self.robot, self.hand, g.finger_q)[0]
+            self.memo[g.frame_index] = any(not hand_hits_static(shape, X_WO @ g.X_OG, self.env) for X_WO in self.poses)
+        return self.memo[g.frame_index]
 
 
 def provenance(problem: Problem, hand: str, options: BuildOptions) -> Provenance:
@@ -197,6 +223,7 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     n = len(frames)
     t1 = time.perf_counter()
     results, kept, done = [], [], 0
+    usable = _Usable(problem, hand)
     # Frames go in fixed chunks, orientation-major (every position for the first
     # orientations of the incremental SO(3) grid, then the next ones), and the results are
     # consumed in order: stopping at the target after a chunk boundary leaves a well-spread
@@ -210,8 +237,8 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     for chunk, out in zip(chunks, outputs):
         results.append(out)
         done += len(chunk)
-        kept = remove_duplicates([g for gs, _ in results for g in gs], options.grasp.duplicate_distance,
-                                 options.grasp.duplicate_angle)
+        kept = [g for g in remove_duplicates([g for gs, _ in results for g in gs], options.grasp.duplicate_distance,
+                                             options.grasp.duplicate_angle) if usable(g)]
         if progress:
             progress(done, n, len(kept))
         if options.grasp.target and len(kept) >= options.grasp.target:

@@ -28,7 +28,7 @@ import numpy as np
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collision_world
 from regrasp_cli.model.ik import IKOptions
 from regrasp_cli.model.robot import Kinematics
-from regrasp_cli.manip.handshape import palm_and_finger_links
+from regrasp_cli.model.handshape import palm_and_finger_links
 from regrasp_cli.roadmap.compose import margin_rule
 from regrasp_cli.motion.local import LocalPlanner, arm_chains, held_reach, joint_reach
 from regrasp_cli.motion.rrt import RRTOptions

@@ -3,7 +3,7 @@
 1. Each hand's grasp list is filtered against the environment at the object pose where
    that hand works (the picking hand at the start pose, the placing hand at the goal): a
    grasp from below collides with the support.  The test places the hand alone
-   (:mod:`plan.handshape`), no IK needed.
+   (:mod:`model.handshape`), no IK needed.
 2. The survivors are ranked by a cheap score (normalised quality + approach cosine) and
    turned into single-grasp configurations (:func:`keyconf.single_configuration`) until
    ``single_per_hand`` are found: the paper's "collision-free single grasps
@@ -11,6 +11,10 @@
 3. Every pair of them is tested for hand-hand collision with both hands on the object;
    a pair's score is the normalised min of the two grasp qualities plus the normalised
    min of the two robot-configuration scores (approach cosine minus free-arm terms).
+4. When every pair collides (a small object, where both hands' best grasps take the
+   same side), the taking hand's configurations are searched again among the grasps
+   that can share the object with one of the giver's (:func:`partners`, hand shapes
+   only), then the giver's among the taker's partners.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import Scratch
-from regrasp_cli.manip.handshape import HandShape, StaticGeometry, hand_hits_static, hands_collide
+from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hands_collide
 from regrasp_cli.manip.keyconf import SingleConfig, approach_axis, shoulder, single_configuration
 
 
@@ -67,9 +71,14 @@ def cheap_order(scratch: Scratch, grasps: GraspList, ks: np.ndarray, X_WO: np.nd
 
 
 def single_configurations(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarray,
-                          env: StaticGeometry) -> tuple[list[SingleConfig], SingleStats]:
+                          env: StaticGeometry, only: np.ndarray | None = None) -> tuple[list[SingleConfig], SingleStats]:
+    """Up to ``single_per_hand`` single-grasp configurations at X_WO, from the grasps
+    (all, or the indices ``only``) that clear the obstacles, best cheap score first."""
     o = scratch.options
-    ks = cheap_order(scratch, grasps, environment_free(grasps, shapes, X_WO, env), X_WO)
+    free = environment_free(grasps, shapes, X_WO, env)
+    if only is not None:
+        free = free[np.isin(free, only)]
+    ks = cheap_order(scratch, grasps, free, X_WO)
     found, tried = [], 0
     for k in ks[:o.grasp_attempts]:
         tried += 1
@@ -79,6 +88,15 @@ def single_configurations(scratch: Scratch, rng: np.random.Generator, grasps: Gr
             if len(found) >= o.single_per_hand:
                 break
     return found, SingleStats(len(grasps), len(ks), tried, len(found))
+
+
+def partners(configs: list[SingleConfig], config_list: GraspList, config_shapes: list[HandShape],
+             other_list: GraspList, other_shapes: list[HandShape]) -> np.ndarray:
+    """Indices of the other hand's grasps that hold the object together with at least one
+    of ``configs`` without the hands colliding (hand shapes only, no IK)."""
+    return np.array([k for k in range(len(other_list))
+                     if any(not hands_collide(config_shapes[c.grasp], config_list.X_OG[c.grasp], other_shapes[k],
+                                              other_list.X_OG[k]) for c in configs)], dtype=int)
 
 
 def double_grasps(giver: list[SingleConfig], giver_list: GraspList, giver_shapes: list[HandShape],

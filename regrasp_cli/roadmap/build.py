@@ -23,7 +23,6 @@ from typing import Callable
 import networkx as nx
 import numpy as np
 
-from regrasp_cli.config import ObstacleSpec
 from regrasp_cli.errors import EmptyRoadmap, InputError
 from regrasp_cli.model.collision import CollisionWorld, collision_world
 from regrasp_cli.parallel import ordered_map
@@ -33,9 +32,9 @@ from regrasp_cli.roadmap.compose import (LEFT, RIGHT, SuperGraph, UnionFind, can
 from regrasp_cli.motion.local import LocalPlanner, distance, joint_reach, joint_weights
 from regrasp_cli.roadmap.rejections import FEW, Rejections, pairs_text, tallied
 from regrasp_cli.roadmap.visprm import Roadmap, VisPRMOptions, visibility_prm
-from regrasp_cli.scene import Problem, load_problem
+from regrasp_cli.scene import Problem, load_problem, obstacles_sha256
 from regrasp_cli.store import Provenance, canonical_json, read_artefact, read_provenance, robot_identity, \
-    sha256_file, sha256_params, write_artefact
+    sha256_params, write_artefact
 
 FORMAT, FORMAT_VERSION = "regrasp.roadmap", 1
 EDGE_CHUNK = 64
@@ -81,12 +80,6 @@ class BuildReport:
 
 
 # ------------------------------------------------------------------ provenance
-
-
-def obstacles_sha256(obstacles: tuple[ObstacleSpec, ...]) -> str:
-    items = [{"name": o.name, "shape": o.shape, "size": list(o.size), "pose": np.round(o.X_WO, 12).tolist(),
-              "mesh": sha256_file(o.mesh) if o.mesh is not None else None} for o in obstacles]
-    return sha256_params(items)
 
 
 def provenance(problem: Problem, options: RoadmapOptions) -> Provenance:

@@ -315,3 +315,46 @@ def test_other_options_are_refused(problem, built):
     other = replace(OPTIONS, grasp=replace(OPTIONS.grasp, n_orientations=64))
     with pytest.raises(StaleArtefactError, match="params"):
         read_grasp_list(built[1].path, provenance(problem, HAND, other))
+
+
+def test_every_stored_grasp_is_usable_at_the_start_or_the_goal(problem, glist):
+    """The list keeps the grasps a hand can use in the scene's task: with the object at its
+    start or goal pose on the desk, the hand at the grasp touches no obstacle (a grasp from
+    under the statuette goes through the desk at both and is not stored)."""
+    from regrasp_cli.model.handshape import hand_hits_static, hand_shapes, static_geometry
+
+    env = static_geometry(problem.spec.obstacles)
+    task = problem.spec.task
+    shapes = hand_shapes(problem.robot, HAND, glist.finger_q)
+    for k, shape in enumerate(shapes):
+        assert any(not hand_hits_static(shape, X_WO @ glist.X_OG[k], env)
+                   for X_WO in (task.X_WO_start, task.X_WO_goal)), k
+
+
+def test_the_list_depends_on_the_task_poses(problem, cache_dir, tmp_path):
+    """Another goal pose is another list (its name and provenance), not a reused one."""
+    data = yaml.safe_load(SCENE_YAML.read_text())
+    data["robot"] = str(ROBOT_YAML)
+    data["object"]["mesh"] = "builtin:statuette"
+    data["task"]["object_goal"]["xyz"][0] += 0.05
+    other = tmp_path / "scene.yaml"
+    other.write_text(yaml.safe_dump(data))
+    moved = load_problem(other, cache_dir)
+    assert artefact_path(cache_dir, moved, HAND, OPTIONS) != artefact_path(cache_dir, problem, HAND, OPTIONS)
+    assert provenance(moved, HAND, OPTIONS).inputs["params"] != provenance(problem, HAND, OPTIONS).inputs["params"]
+
+
+def test_partners_share_the_object_without_the_hands_colliding(problem, glist):
+    """manip.doublegrasp.partners: the other hand's grasps that can hold the object
+    together with a given one; a grasp never partners with itself (two hands in one place)."""
+    from types import SimpleNamespace
+
+    from regrasp_cli.manip.doublegrasp import partners
+    from regrasp_cli.model.handshape import hand_shapes, hands_collide
+
+    shapes = hand_shapes(problem.robot, HAND, glist.finger_q)
+    for k in range(min(3, len(glist))):
+        found = set(partners([SimpleNamespace(grasp=k)], glist, shapes, glist, shapes).tolist())
+        assert k not in found
+        for j in range(len(glist)):
+            assert (j in found) == (not hands_collide(shapes[k], glist.X_OG[k], shapes[j], glist.X_OG[j]))

@@ -31,7 +31,7 @@ from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, mesh_ge
 from regrasp_cli.manip.context import OnlineOptions, Scratch
 from regrasp_cli.manip.doublegrasp import cheap_order, double_grasps, environment_free, single_configurations
 from regrasp_cli.manip.exchange import exchange_orientation, grid_nodes, wrist_path_cost
-from regrasp_cli.manip.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, hands_collide, \
+from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, hands_collide, \
     static_geometry
 from regrasp_cli.manip.keyconf import SingleConfig, approach_axis, cartesian_line, preshapes, shoulder, \
     single_configuration, wrist

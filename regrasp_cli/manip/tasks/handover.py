@@ -29,9 +29,9 @@ import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions, Scratch
-from regrasp_cli.manip.doublegrasp import DoubleGrasp, double_grasps, single_configurations
+from regrasp_cli.manip.doublegrasp import DoubleGrasp, double_grasps, partners, single_configurations
 from regrasp_cli.manip.exchange import exchange_orientation, exchange_position, grid_nodes
-from regrasp_cli.manip.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, \
+from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, \
     palm_and_finger_links, static_geometry
 from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, approach_axis, exchange_configuration, shoulder, wrist
 from regrasp_cli.manip.modes import Kind, Mode, Transition
@@ -180,8 +180,18 @@ def _double_grasps(scratch: Scratch, lists: dict[str, GraspList], shapes: dict, 
                     f"({st.environment_free} of {st.listed} grasps clear the obstacles, {st.tried} tried with IK)",
                     counts)
     doubles = double_grasps(cfg_g, lists[g], shapes[g], cfg_t, lists[t], shapes[t])
+    n_pairs = (len(cfg_g), len(cfg_t))
+    if not doubles:  # both hands' best take the same side: search each among the other's partners
+        rng = np.random.default_rng([seed, 20])
+        cfg_t2, _ = single_configurations(scratch, rng, lists[t], shapes[t], task.X_WO_goal, env,
+                                          partners(cfg_g, lists[g], shapes[g], lists[t], shapes[t]))
+        doubles = double_grasps(cfg_g, lists[g], shapes[g], cfg_t2, lists[t], shapes[t])
+        if not doubles:
+            cfg_g2, _ = single_configurations(scratch, rng, lists[g], shapes[g], task.X_WO_start, env,
+                                              partners(cfg_t, lists[t], shapes[t], lists[g], shapes[g]))
+            doubles = double_grasps(cfg_g2, lists[g], shapes[g], cfg_t, lists[t], shapes[t])
     counts["double_grasps"] = len(doubles)
-    return doubles or f"all {len(cfg_g)} x {len(cfg_t)} grasp pairs make the hands collide", counts
+    return doubles or f"all {n_pairs[0]} x {n_pairs[1]} grasp pairs make the hands collide", counts
 
 
 def choose_hands(scratch: Scratch, lists: dict[str, GraspList], seed: int) -> tuple[str, list[DoubleGrasp], dict]:
