@@ -102,8 +102,8 @@ def sample_times(view: PlanView, fps: float) -> np.ndarray:
         raise ValueError(f"fps must be in (0, {MAX_FPS}], got {fps}")
     T = view.duration
     t = np.concatenate([np.arange(0.0, T, 1.0 / fps), [T], *(p.times for p in view.plan.phases)])
-    t = np.round(t, 9)  # rounding may lift T above itself: clip, do not drop it
-    return np.unique(np.clip(t[(t >= 0.0) & (t <= T + 1e-9)], 0.0, T))
+    t = np.round(t, 9)  # rounding may move T by up to 0.5 ns either way: the end is T itself
+    return np.unique(np.concatenate([t[(t >= 0.0) & (t < T - 1e-9)], [T]]))
 
 
 def phase_at(view: PlanView, t: np.ndarray) -> np.ndarray:
