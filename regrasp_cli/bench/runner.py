@@ -102,6 +102,7 @@ def offline_stages(suite: Suite, cache_dir: Path, jobs: int, builder=None) -> di
     problem, the grasp lists of both hands and the roadmap (when a planner needs it),
     building whichever is missing or stale, and of making the Super Graph ready."""
     from regrasp_cli.artefacts import load_artefacts
+    from regrasp_cli.errors import EmptyResultError
     from regrasp_cli.manip.queries import Roadmap
     from regrasp_cli.scene import load_problem
 
@@ -117,8 +118,12 @@ def offline_stages(suite: Suite, cache_dir: Path, jobs: int, builder=None) -> di
                 continue
             before = _snapshot(Path(cache_dir) / folder)
             t0 = time.perf_counter()
-            lists, art, _ = load_artefacts(scene, cache_dir, problem, True, jobs, roadmap, builder,
-                                           suite.roadmap_nodes, suite.grasp_target)
+            try:
+                lists, art, _ = load_artefacts(scene, cache_dir, problem, True, jobs, roadmap, builder,
+                                               suite.roadmap_nodes, suite.grasp_target)
+            except EmptyResultError as exc:  # the scene's runs fail on the missing artefact, the others go on
+                row[what] = {"s": time.perf_counter() - t0, "status": f"empty ({exc})"}
+                break
             seconds = time.perf_counter() - t0
             built = _snapshot(Path(cache_dir) / folder) != before
             row[what] = {"s": seconds, "status": "built" if built else "cached"}

@@ -106,3 +106,32 @@ def test_a_worker_context_is_keyed_by_its_inputs_so_a_rebuilt_artefact_is_reload
     (cache / "roadmap").mkdir()
     (cache / "roadmap" / "r.h5").write_bytes(b"r")
     assert _stamp(str(scene), str(cache)) != second
+
+
+def test_an_empty_grasp_list_fails_its_scene_and_the_suite_goes_on(tmp_path, monkeypatch, problem, cache_dir):
+    """A scene whose object no hand can grasp is recorded as such in the offline stages;
+    the other scenes are still prepared (the runs of the first then fail on its missing
+    list, each with its reason)."""
+    import regrasp_cli.artefacts as artefacts
+    import regrasp_cli.scene as scene_module
+    from regrasp_cli.bench.runner import offline_stages
+    from regrasp_cli.bench.suite import Suite
+    from regrasp_cli.errors import EmptyGraspList
+
+    root = Path(__file__).resolve().parents[2]
+    first, second = tmp_path / "a.yaml", tmp_path / "b.yaml"
+    for p in (first, second):
+        p.write_text((root / "configs" / "scenes" / "desk_handover.yaml").read_text())
+
+    def load(scene, *args, **kwargs):
+        if Path(scene) == first:
+            raise EmptyGraspList("right", "0 of 10 candidate grasp frames gave a grasp")
+        return {"right": SimpleNamespace(X_OG=np.zeros((3, 4, 4))), "left": SimpleNamespace(X_OG=np.zeros((2, 4, 4)))}, \
+            None, {}
+
+    monkeypatch.setattr(artefacts, "load_artefacts", load)
+    monkeypatch.setattr(scene_module, "load_problem", lambda *a, **k: problem)
+    suite = Suite(tmp_path / "suite.yaml", "t", (first, second), ("rrt-connect",), (0,))
+    out = offline_stages(suite, cache_dir, 1)
+    assert out["a"]["grasp lists"]["status"].startswith("empty (the right hand's grasp list is empty: 0 of 10")
+    assert out["b"]["grasp lists"]["size"] == {"right": 3, "left": 2}
