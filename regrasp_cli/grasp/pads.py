@@ -36,8 +36,7 @@ import pinocchio as pin
 import trimesh
 
 from regrasp_cli.grasp.jaw import ADVANCE_ITERATIONS, CONTACT_GAP, _finger_pairs, contact_patch, outside_distance
-from regrasp_cli.grasp.quality import grasp_quality
-from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel
+from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, scored_grasp
 from regrasp_cli.grasp.surface import Surface
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.spatial import inverse
@@ -309,11 +308,5 @@ def pad_grasp(hm: HandModel, pads: PadHand, surface: Surface, X_OG: np.ndarray, 
         if outside_distance(geometry, grow, ((p - X[:3, 3]) @ X[:3, :3])[None])[0] > PAD_CONTACT:
             p, n = w, surface.normals[near]  # a patch in pieces (a link around an edge): its middle is off the link
         points[f], normals[f], axes[f] = p, n, -n
-    c = touching
-    kappa = surface.curvature[surface.tree.query(points[c])[1]]
-    scores = grasp_quality(points[c], normals[c], friction, surface.mass_centre, axes[c], kappa, rho,
-                           options.weights, contact=h.spec.contact, n_edges=options.cone_edges)
-    if not scores.is_force_closure:
-        stats["not_force_closure"] = 1
-        return None, stats
-    return Grasp(frame_index, X_OG.copy(), q[h.idx].copy(), touching, points, normals, scores), stats
+    return scored_grasp(hm, surface, X_OG, frame_index, q, touching, points, normals, axes, friction, rho, options,
+                        stats)

@@ -271,11 +271,20 @@ def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surf
     if hm.collides(q, set(range(n_f)), None):
         stats["hand_collision"] = 1
         return None, stats
+    return scored_grasp(hm, surface, X_OG, frame_index, q, in_contact, points, normals, axes, friction, rho,
+                        options, stats)
+
+
+def scored_grasp(hm: HandModel, surface: Surface, X_OG: np.ndarray, frame_index: int, q: np.ndarray,
+                 in_contact: np.ndarray, points: np.ndarray, normals: np.ndarray, axes: np.ndarray, friction: float,
+                 rho: float, options: GraspOptions, stats: dict) -> tuple[Grasp | None, dict]:
+    """The grasp with these contacts (per finger, rows of ``in_contact`` used), scored
+    (:mod:`.quality`), or None when it is not force closure (counted in ``stats``)."""
     c = in_contact
     kappa = surface.curvature[surface.tree.query(points[c])[1]]
     scores = grasp_quality(points[c], normals[c], friction, surface.mass_centre, axes[c], kappa, rho,
-                           options.weights, contact=h.spec.contact, n_edges=options.cone_edges)
+                           options.weights, contact=hm.hand.spec.contact, n_edges=options.cone_edges)
     if not scores.is_force_closure:
         stats["not_force_closure"] = 1
         return None, stats
-    return Grasp(frame_index, X_OG.copy(), q[h.idx].copy(), in_contact, points, normals, scores), stats
+    return Grasp(frame_index, X_OG.copy(), q[hm.hand.idx].copy(), in_contact, points, normals, scores), stats
