@@ -37,10 +37,10 @@ def write_scene(path: Path, d: dict) -> Path:
     return path
 
 
-def assert_one_error_line(result: Result, *words: str) -> str:
-    """Exit code 2, no traceback, exactly one `error:` line on stderr (other lines, if
-    any, are warnings) naming ``words``; returns the error line."""
-    assert result.exit_code == 2, (result.exit_code, result.output, result.exception)
+def assert_one_error_line(result: Result, *words: str, exit_code: int = 2) -> str:
+    """Exit code 2 (bad input; 1: no result), no traceback, exactly one `error:` line on
+    stderr (other lines, if any, are warnings) naming ``words``; returns the error line."""
+    assert result.exit_code == exit_code, (result.exit_code, result.output, result.exception)
     assert "Traceback" not in result.output and "Traceback" not in result.stderr
     assert not isinstance(result.exception, Exception) or isinstance(result.exception, SystemExit)
     lines = result.stderr.strip().splitlines()

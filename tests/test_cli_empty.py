@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from click.testing import Result
 
-from cli_helpers import ROBOT_YAML, needs_separate_stderr, run, write_scene
+from cli_helpers import ROBOT_YAML, assert_one_error_line, needs_separate_stderr, run, write_scene
 
 pytestmark = needs_separate_stderr
 
@@ -31,17 +31,8 @@ def baxter_scene(path: Path, obj: dict = BLOCK, obstacles: list | None = None, r
 
 
 def assert_one_failure_line(result: Result, *words: str) -> str:
-    """Exit code 1, no traceback, exactly one `error:` line on stderr (other lines are
-    warnings) naming ``words``; returns it."""
-    assert result.exit_code == 1, (result.exit_code, result.output, result.exception)
-    assert "Traceback" not in result.output and "Traceback" not in result.stderr
-    lines = result.stderr.strip().splitlines()
-    errors = [ln for ln in lines if ln.startswith("error:")]
-    assert len(errors) == 1, result.stderr
-    assert all(ln.startswith(("error:", "warning:")) for ln in lines), result.stderr
-    for w in words:
-        assert w in errors[0], (w, errors[0])
-    return errors[0]
+    """Exit code 1 (no result), otherwise as :func:`assert_one_error_line`."""
+    return assert_one_error_line(result, *words, exit_code=1)
 
 
 def artefacts(cache: Path, folder: str) -> list[Path]:
