@@ -38,7 +38,7 @@ import trimesh
 from regrasp_cli.grasp.jaw import ADVANCE_ITERATIONS, CONTACT_GAP, _finger_pairs, contact_patch, outside_distance
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, scored_grasp
 from regrasp_cli.grasp.surface import Surface
-from regrasp_cli.model.robot import Kinematics
+from regrasp_cli.model.robot import Kinematics, carries
 from regrasp_cli.spatial import inverse
 
 APPROACH_TILT = np.radians(20.0)  # rad: approach directions within this cone about -n
@@ -120,7 +120,7 @@ def pad_geometry(hm: HandModel, samples: int = 11) -> PadHand:
                 if robot.prismatic[i]:
                     arm = 1.0
                 else:  # every finger point carried by joint j: farthest from its origin
-                    carried = [a for a in corners if _carries(model, j, hm.gm.geometryObjects[a].parentJoint)]
+                    carried = [a for a in corners if carries(model, j, hm.gm.geometryObjects[a].parentJoint)]
                     o = data.oMi[j].translation
                     arm = max((np.linalg.norm(corners[a] @ hm.gd.oMg[a].rotation.T + hm.gd.oMg[a].translation - o,
                                               axis=1).max() for a in carried), default=0.0)
@@ -150,15 +150,6 @@ def corners_W(hm: HandModel, a: int) -> np.ndarray:
     """Bounding-box corners (8, 3) of geometry a of the hand model, in W (placements current)."""
     X = hm.gd.oMg[a]
     return _corners(hm.gm.geometryObjects[a].geometry) @ X.rotation.T + X.translation
-
-
-def _carries(model, j: int, k: int) -> bool:
-    """Joint j is joint k or one of its ancestors."""
-    while k > 0:
-        if k == j:
-            return True
-        k = model.parents[k]
-    return False
 
 
 def pad_frames(pads: PadHand, mesh: trimesh.Trimesh, surface: Surface, n: int,

@@ -278,6 +278,15 @@ class Robot:
         return self.model.frames[self.collision_model.geometryObjects[gid].parentFrame].name
 
 
+def carries(model: pin.Model, j: int, k: int) -> bool:
+    """Pinocchio joint j moves joint k: j is k, one of its ancestors, or the root (0)."""
+    while k > 0:
+        if k == j:
+            return True
+        k = model.parents[k]
+    return j == 0
+
+
 def _convexify(gm: pin.GeometryModel) -> None:
     """Every mesh geometry of ``gm`` replaced by its convex hull (robot.yaml's
     ``convex_hulls``, on by default): it contains the mesh, so a configuration free with

@@ -36,7 +36,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from regrasp_cli.model.robot import Robot
+from regrasp_cli.model.robot import Robot, carries
 
 COMMON, RIGHT, LEFT, OBSTACLE = "T", "R", "L", "O"
 
@@ -98,7 +98,7 @@ def close_at_rest(robot: Robot, margin: float) -> frozenset[frozenset[str]]:
     for a in range(len(objs)):
         for b in range(a + 1, len(objs)):
             ja, jb = objs[a].parentJoint, objs[b].parentJoint
-            if ja == jb or not (_carries(model, ja, jb) or _carries(model, jb, ja)):
+            if ja == jb or not (carries(model, ja, jb) or carries(model, jb, ja)):
                 continue
             la, lb = (model.frames[objs[k].parentFrame].name for k in (a, b))
             X, Y = gd.oMg[a], gd.oMg[b]
@@ -108,16 +108,6 @@ def close_at_rest(robot: Robot, margin: float) -> frozenset[frozenset[str]]:
             if d < margin:
                 out.add(frozenset((la, lb)))
     return frozenset(out)
-
-
-def _carries(model, j: int, k: int) -> bool:
-    """Joint j is a strict ancestor of joint k."""
-    k = model.parents[k]
-    while k > 0:
-        if k == j:
-            return True
-        k = model.parents[k]
-    return j == 0
 
 
 def part_filter(parts: dict[str, str], accept: Callable[[str, str], bool]) -> Callable[[str, str], bool]:
