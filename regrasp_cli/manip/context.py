@@ -46,15 +46,19 @@ class OnlineOptions:
     lift_height: float = 0.06  # the object is lifted (and lowered) vertically by this
     line_steps: int = 4  # IK waypoints of an approach, retreat or lift line
     preshape: tuple[float, ...] = (1.0, 0.6, 0.35, 0.2)  # finger opening tried, open = 1
+    backoff: tuple[float, ...] = (0.015, 0.008)  # m: then fingertips backed off their contacts by these
     single_per_hand: int = 6  # single-grasp configurations kept per hand (§IV-B)
     grasp_attempts: int = 40  # grasps of a list tried before giving up
     key_samples: int = 6  # samples of the non-grasping joints per grasp (§V-C)
     sample_sigma: float = 0.3  # rad: spread of those samples around the rest configuration
+    ik_seeds: int = 2  # arm IK from random postures when those from the sample give no grasp
+    base_draws: int = 4  # draws of a sample until the non-grasping joints are collision-free
     exchange_step: float = 0.05  # grid step of the exchange position (Fig. 6)
     exchange_samples: int = 16  # Gaussian samples of the exchange pose per double grasp
     exchange_sigma: float = 0.04  # m, position spread of those samples
     exchange_angle_sigma: float = 0.15  # rad, orientation spread
     double_grasps_tried: int = 10
+    double_grasps_wanted: int = 6  # fewer pairs than this: each hand searched again among the other's partners
     key_attempts: int = 3  # double grasps (with their exchange) tried in turn when a query fails
     resolution: float = 0.02  # rad: dense segment check
     cartesian_step: float = 0.01  # m: dense segment check
@@ -90,6 +94,7 @@ class Scratch:
     def __post_init__(self) -> None:
         self.kin = Kinematics(self.problem.robot)
         self._held: dict = {}  # local planners for a held object, by hand and placement
+        self.backed_off: dict = {}  # pre-shapes backed off the contacts, by hand, grasp and distance (keyconf)
         self.local = LocalPlanner(self.options.resolution, self.options.cartesian_step / 2,
                                   joint_reach(self.problem.robot), self.options.coarse_checks)
         self.chains = arm_chains(self.problem.robot)  # the displacement bound per class of pairs

@@ -11,10 +11,11 @@
 3. Every pair of them is tested for hand-hand collision with both hands on the object;
    a pair's score is the normalised min of the two grasp qualities plus the normalised
    min of the two robot-configuration scores (approach cosine minus free-arm terms).
-4. When every pair collides (a small object, where both hands' best grasps take the
-   same side), the taking hand's configurations are searched again among the grasps
-   that can share the object with one of the giver's (:func:`partners`, hand shapes
-   only), then the giver's among the taker's partners.
+4. When few pairs are free (fewer than ``double_grasps_wanted``: a small object, where
+   both hands' best grasps take the same side), the taking hand's configurations are
+   searched again among the grasps that can share the object with one of the giver's
+   (:func:`partners`, hand shapes only), the giver's among the taker's partners, and
+   every pair of all configurations found is tested and scored.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
-from regrasp_cli.model.ik import IKOptions, arm_ik, solve_pose
+from regrasp_cli.model.ik import IKOptions, arm_ik, finger_ik, solve_pose, two_arm_ik
 from regrasp_cli.manip.context import Scratch
 from regrasp_cli.spatial import inverse
 
@@ -132,16 +132,20 @@ def _translated(X: np.ndarray, d: np.ndarray) -> np.ndarray:
 def cartesian_line(scratch: Scratch, rng: np.random.Generator, hand: str, q_end: np.ndarray, X_far: np.ndarray, steps: int) -> np.ndarray | None:
     """Waypoints (steps + 1, nq) moving the hand's grasp frame on a straight line from
     X_far (orientation kept) to where it is at ``q_end``; only the arm moves.  None when
-    IK fails or the arm would jump (a branch change)."""
+    IK fails or the arm would jump (a branch change).  Where the arm alone cannot follow
+    the line (stretched out), the torso helps."""
     robot = scratch.problem.robot
     h = robot.hands[hand]
     X_end = scratch.kin.fk(q_end, h.grasp_frame)
     qs, q = [q_end], q_end
     opts = IKOptions(restarts=0, max_iters=60)
+    with_torso = np.concatenate([robot.groups["torso"], h.arm_idx])
     for i in range(1, steps + 1):
         X = X_end.copy()
         X[:3, 3] = X_end[:3, 3] + (X_far[:3, 3] - X_end[:3, 3]) * (i / steps)
         res = solve_pose(robot, h.grasp_frame, X, q, h.arm_idx, rng, opts)
+        if not res.success and len(robot.groups["torso"]):
+            res = solve_pose(robot, h.grasp_frame, X, q, with_torso, rng, opts)
         if not res.success or np.max(np.abs(res.q - q)) > 0.6:
             return None
         q = res.q
@@ -155,10 +159,43 @@ def with_fingers(scratch: Scratch, q: np.ndarray, hand: str, values: np.ndarray)
     return out
 
 
-def preshapes(scratch: Scratch, hand: str, closed: np.ndarray) -> list[np.ndarray]:
-    """Finger values opened from ``closed`` towards open, most open first."""
-    open_ = scratch.problem.robot.hands[hand].open
-    return [closed + a * (open_ - closed) for a in scratch.options.preshape]
+def preshapes(scratch: Scratch, grasps: GraspList, k: int):
+    """Pre-shapes of grasp ``k``, lazily (finger values, (n_hand_joints,)): opened from
+    closed towards open, most open first; for a fingertip hand, then every fingertip
+    backed off its contact along the surface normal (finger IK), farthest first: opening
+    a low pinch towards the open hand can swing a finger into the support, backing off
+    moves each tip straight out of its contact."""
+    h = scratch.problem.robot.hands[grasps.hand]
+    closed = grasps.finger_q[k]
+    for a in scratch.options.preshape:
+        yield closed + a * (h.open - closed)
+    for d in scratch.options.backoff if h.kind == "fingertips" else ():
+        key = (grasps.hand, k, d)  # computed once per run, and only when the openings above collide
+        if key not in scratch.backed_off:
+            scratch.backed_off[key] = _backed_off(scratch, grasps, k, d)
+        if scratch.backed_off[key] is not None:
+            yield scratch.backed_off[key]
+
+
+_BACK_OFF_IK = IKOptions(restarts=0, max_iters=30)  # from the closed values only: no random restart
+
+
+def _backed_off(scratch: Scratch, grasps: GraspList, k: int, distance: float) -> np.ndarray | None:
+    """Finger values (n_hand_joints,) of grasp ``k`` with every fingertip in contact moved
+    out of its contact along the surface normal, towards ``distance`` (m) out and at least
+    half of it (finger IK from the closed values, no restart: a joint limit may stop a
+    finger short of the exact target), or None when a finger cannot back off that far."""
+    robot = scratch.problem.robot
+    h = robot.hands[grasps.hand]
+    q = with_fingers(scratch, robot.q_rest, grasps.hand, grasps.finger_q[k])
+    X_WO = scratch.kin.fk(q, h.grasp_frame) @ inverse(grasps.X_OG[k])  # the hand where it is at rest
+    for f in np.nonzero(grasps.in_contact[k])[0]:
+        r = h.spec.fingers[f].tip_radius
+        p_W, n_W = X_WO[:3, :3] @ grasps.points[k, f] + X_WO[:3, 3], X_WO[:3, :3] @ grasps.normals[k, f]
+        q = finger_ik(robot, grasps.hand, int(f), p_W + (r + distance) * n_W, q, None, _BACK_OFF_IK).q
+        if (scratch.kin.fk(q, h.tip_frames[f])[:3, 3] - p_W) @ n_W < r + distance / 2:
+            return None
+    return q[h.idx]
 
 
 def _approach(scratch: Scratch, rng: np.random.Generator, hand: str, q_pre: np.ndarray, centre_W: np.ndarray, world,
@@ -202,6 +239,43 @@ def _sample_base(scratch: Scratch, rng: np.random.Generator, s: int, moving: np.
     return q
 
 
+def _reaches(scratch: Scratch, rng: np.random.Generator, hand: str, X_WG: np.ndarray, base: np.ndarray):
+    """Configurations (nq,) from ``base`` with ``hand``'s grasp frame at X_WG, lazily: the
+    arm alone (the torso as sampled), then the torso and the arm together, for what the
+    arm alone cannot reach or reaches only contorted (an object low on the desk at arm's
+    length: §V-C samples the non-grasping joints, but a humanoid leans to pick it up)."""
+    robot, o = scratch.problem.robot, scratch.options
+    ik = arm_ik(robot, hand, X_WG, base, rng, options=o.ik)
+    if ik.success:
+        yield ik.q
+    if len(robot.groups["torso"]):
+        ik = arm_ik(robot, hand, X_WG, base, rng, with_torso=True, options=o.ik)
+        if ik.success:
+            yield ik.q
+    idx = np.concatenate([robot.groups["torso"], robot.hands[hand].arm_idx])
+    for _ in range(o.ik_seeds):  # other postures (lean, elbow, wrist) for the same hand pose
+        seed = base.copy()
+        seed[idx] = rng.uniform(robot.lower[idx], robot.upper[idx])
+        ik = arm_ik(robot, hand, X_WG, seed, rng, with_torso=bool(len(robot.groups["torso"])), options=o.ik)
+        if ik.success:
+            yield ik.q
+
+
+def _reach_both(scratch: Scratch, rng: np.random.Generator, hands: tuple[str, str],
+                X_WGs: tuple[np.ndarray, np.ndarray], base: np.ndarray) -> np.ndarray | None:
+    """A configuration (nq,) from ``base`` with both hands' grasp frames at ``X_WGs``: each
+    arm alone first (the torso as sampled), then the torso and both arms solved together
+    (the torso cannot lean towards one hand without moving the other's shoulder); None
+    when neither converges."""
+    robot, o = scratch.problem.robot, scratch.options
+    ik = arm_ik(robot, hands[0], X_WGs[0], base, rng, options=o.ik)
+    if ik.success:
+        ik = arm_ik(robot, hands[1], X_WGs[1], ik.q, rng, options=o.ik)
+    if not ik.success and len(robot.groups["torso"]):
+        ik = two_arm_ik(robot, hands, X_WGs, base, rng, options=o.ik)
+    return ik.q if ik.success else None
+
+
 # ------------------------------------------------------------------ single grasps
 
 
@@ -209,43 +283,72 @@ def single_configuration(scratch: Scratch, rng: np.random.Generator, grasps: Gra
     """A collision-free configuration grasping the object at X_WO (resting on its support)
     with grasp ``k`` of the hand's list, with its approach and lift lines; None when the
     samples are exhausted."""
+    robot, o, hand = scratch.problem.robot, scratch.options, grasps.hand
+    X_WG = X_WO @ grasps.X_OG[k]
+    w_free = scratch.world(X_WO)
+    moving = np.concatenate([robot.groups["torso"], robot.hands[OTHER[hand]].arm_idx])
+    for s in range(o.key_samples):
+        base = next((b for b in (_sample_base(scratch, rng, s, moving) for _ in range(o.base_draws))
+                     if w_free.is_free(b)), None)  # a free arm drawn through the desk is drawn again
+        if base is None:
+            continue
+        for q in _reaches(scratch, rng, hand, X_WG, base):
+            c = _grasp_at(scratch, rng, grasps, k, X_WO, q)
+            if c is not None:
+                return c
+    return None
+
+
+def _free_arm_clear(scratch: Scratch, rng: np.random.Generator, hand: str, q: np.ndarray, world) -> np.ndarray | None:
+    """``q`` when it is free in ``world``, else ``q`` with the free arm (the other hand's)
+    drawn again around rest until it is (a torso that leans to reach can put that arm
+    through the desk), up to ``base_draws`` times; None when no draw is free."""
+    robot, o = scratch.problem.robot, scratch.options
+    arm = robot.hands[OTHER[hand]].arm_idx
+    if world.is_free(q):
+        return q
+    for _ in range(o.base_draws):
+        r = q.copy()
+        r[arm] = np.clip(robot.q_rest[arm] + rng.normal(0.0, o.sample_sigma, len(arm)), robot.lower[arm],
+                         robot.upper[arm])
+        if world.is_free(r):
+            return r
+    return None
+
+
+def _grasp_at(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: int, X_WO: np.ndarray,
+              q: np.ndarray) -> SingleConfig | None:
+    """The single-grasp configuration with the arm at ``q`` (grasp ``k`` reached), when the
+    closed hand, the pre-shape, the lift and the approach are free."""
     p, o = scratch.problem, scratch.options
     robot, hand = p.robot, grasps.hand
     X_OG = grasps.X_OG[k]
     X_WG = X_WO @ X_OG
     w_free = scratch.world(X_WO)
     w_touch = scratch.world(X_WO, touching=(hand,))
+    q_closed = _free_arm_clear(scratch, rng, hand, with_fingers(scratch, q, hand, grasps.finger_q[k]), w_touch)
+    if q_closed is None:
+        return None
+    q = with_fingers(scratch, q_closed, hand, robot.hands[hand].open)
+    q_pre = next((qp for qp in (with_fingers(scratch, q, hand, f) for f in preshapes(scratch, grasps, k))
+                  if w_free.is_free(qp) and scratch.segment_free(w_touch, qp, q_closed)), None)
+    if q_pre is None:
+        return None
+    lift = cartesian_line(scratch, rng, hand, q_closed, _translated(X_WG, np.array([0, 0, o.lift_height])), o.line_steps)
+    if lift is None:
+        return None
+    lift = lift[::-1]
+    w_held = scratch.world(inverse(X_OG), attached=hand, touching=(hand,))
+    if not scratch.path_free(w_held, lift) or not scratch.certified(w_held).is_free(lift[-1]):
+        return None  # the top of the lift is a query's end: it keeps the queries' clearance
     centre = X_WO[:3, :3] @ p.object.mesh.centroid + X_WO[:3, 3]
-    moving = np.concatenate([robot.groups["torso"], robot.hands[OTHER[hand]].arm_idx])
-    for s in range(o.key_samples):
-        base = _sample_base(scratch, rng, s, moving)
-        if not w_free.is_free(base):
-            continue
-        ik = arm_ik(robot, hand, X_WG, base, rng, options=o.ik)
-        if not ik.success:
-            continue
-        q_closed = with_fingers(scratch, ik.q, hand, grasps.finger_q[k])
-        if not w_touch.is_free(q_closed):
-            continue
-        q_pre = next((q for q in (with_fingers(scratch, ik.q, hand, f) for f in preshapes(scratch, hand, grasps.finger_q[k]))
-                      if w_free.is_free(q) and scratch.segment_free(w_touch, q, q_closed)), None)
-        if q_pre is None:
-            continue
-        lift = cartesian_line(scratch, rng, hand, q_closed, _translated(X_WG, np.array([0, 0, o.lift_height])), o.line_steps)
-        if lift is None:
-            continue
-        lift = lift[::-1]
-        w_held = scratch.world(inverse(X_OG), attached=hand, touching=(hand,))
-        if not scratch.path_free(w_held, lift) or not scratch.certified(w_held).is_free(lift[-1]):
-            continue  # the top of the lift is a query's end: it keeps the queries' clearance
-        approach = _approach(scratch, rng, hand, q_pre, centre, w_free, (np.array([0.0, 0.0, 1.0]),))
-        if approach is None:
-            continue
-        a_W = X_WG[:3, :3] @ approach_axis(scratch, hand)
-        to_obj = X_WO[:3, 3] - shoulder(scratch, hand, q_closed)
-        cos = float(a_W @ to_obj / max(np.linalg.norm(to_obj), 1e-9))
-        return SingleConfig(hand, k, X_WO, approach, q_closed, lift, cos, free_arm_cost(scratch, hand, q_closed))
-    return None
+    approach = _approach(scratch, rng, hand, q_pre, centre, w_free, (np.array([0.0, 0.0, 1.0]),))
+    if approach is None:
+        return None
+    a_W = X_WG[:3, :3] @ approach_axis(scratch, hand)
+    to_obj = X_WO[:3, 3] - shoulder(scratch, hand, q_closed)
+    cos = float(a_W @ to_obj / max(np.linalg.norm(to_obj), 1e-9))
+    return SingleConfig(hand, k, X_WO, approach, q_closed, lift, cos, free_arm_cost(scratch, hand, q_closed))
 
 
 # ------------------------------------------------------------------ exchange
@@ -269,20 +372,17 @@ def exchange_configuration(scratch: Scratch, rng: np.random.Generator, giver: Gr
     torso = robot.groups["torso"]
     for s in range(o.key_samples):
         base = _sample_base(scratch, rng, s, torso)
-        ik_g = arm_ik(robot, g, X_WO @ X_OGg, base, rng, options=o.ik)
-        if not ik_g.success:
+        q = _reach_both(scratch, rng, (g, t), (X_WO @ X_OGg, X_WO @ X_OGt), base)
+        if q is None:
             continue
-        ik_t = arm_ik(robot, t, X_WO @ X_OGt, ik_g.q, rng, options=o.ik)
-        if not ik_t.success:
-            continue
-        q_both = with_fingers(scratch, with_fingers(scratch, ik_t.q, g, fg), t, ft)
+        q_both = with_fingers(scratch, with_fingers(scratch, q, g, fg), t, ft)
         if not w_gt.is_free(q_both):
             continue
-        q_tpre = next((q for q in (with_fingers(scratch, q_both, t, f) for f in preshapes(scratch, t, ft))
+        q_tpre = next((q for q in (with_fingers(scratch, q_both, t, f) for f in preshapes(scratch, taker, kt))
                        if w_g.is_free(q) and scratch.segment_free(w_gt, q, q_both)), None)
         if q_tpre is None:
             continue
-        q_gpre = next((q for q in (with_fingers(scratch, q_both, g, f) for f in preshapes(scratch, g, fg))
+        q_gpre = next((q for q in (with_fingers(scratch, q_both, g, f) for f in preshapes(scratch, giver, kg))
                        if w_t.is_free(q) and scratch.segment_free(w_tg, q_both, q)), None)
         if q_gpre is None:
             continue

@@ -45,11 +45,12 @@ def _dls(J: np.ndarray, e: np.ndarray, damping: float) -> np.ndarray:
     return J.T @ np.linalg.solve(JJt, e)
 
 
-def _solve(robot: Robot, frame: int, q_seed: np.ndarray, idx: np.ndarray, rng: np.random.Generator,
+def _solve(robot: Robot, frames: tuple[int, ...], q_seed: np.ndarray, idx: np.ndarray, rng: np.random.Generator,
            options: IKOptions, residual, reference, rows: slice) -> IKResult:
-    """DLS with joint clamping and random restarts.  ``residual(X) -> (e, position error,
-    rotation error)`` with ``e`` expressed in ``reference``, the frame of the Jacobian
-    rows kept (``rows``)."""
+    """DLS with joint clamping and random restarts on the stacked tasks of ``frames``.
+    ``residual(k, X) -> (e, position error, rotation error)`` for frame ``frames[k]`` at
+    X, with ``e`` expressed in ``reference``, the frame of the Jacobian rows kept
+    (``rows``); the errors reported are the largest over the frames."""
     model, data = robot.model, robot.model.createData()
     lo, hi = robot.lower[idx], robot.upper[idx]
     best, iters = None, 0
@@ -61,16 +62,25 @@ def _solve(robot: Robot, frame: int, q_seed: np.ndarray, idx: np.ndarray, rng: n
             iters += 1
             qp = robot.to_pin(q)
             pin.forwardKinematics(model, data, qp)
-            e, ep, er = residual(pin.updateFramePlacement(model, data, frame))
+            res = [residual(k, pin.updateFramePlacement(model, data, f)) for k, f in enumerate(frames)]
+            ep, er = max(r[1] for r in res), max(r[2] for r in res)
             if ep < options.tol_position and er < options.tol_rotation:
                 return IKResult(q, True, ep, er, iters)
-            J = pin.computeFrameJacobian(model, data, qp, frame, reference)[rows]
+            e = np.concatenate([r[0] for r in res])
+            J = np.vstack([pin.computeFrameJacobian(model, data, qp, f, reference)[rows] for f in frames])
             J = J[:, robot._idx_q[idx]] if robot._identity else _jacobian_columns(robot, J, idx)
             dq = np.clip(_dls(J, e, options.damping), -options.max_step, options.max_step)
             q[idx] = np.clip(q[idx] + dq, lo, hi)
         if best is None or ep + 0.1 * er < best.position_error + 0.1 * best.rotation_error:
             best = IKResult(q, False, ep, er, iters)
     return IKResult(best.q, False, best.position_error, best.rotation_error, iters)
+
+
+def _pose_residual(targets: list[pin.SE3]):
+    def residual(k: int, X):
+        e = pin.log6(X.actInv(targets[k])).vector  # in the local frame
+        return e, float(np.linalg.norm(X.translation - targets[k].translation)), float(np.linalg.norm(e[3:]))
+    return residual
 
 
 def solve_pose(robot: Robot, frame: int, X_WT: np.ndarray, q_seed: np.ndarray, idx: np.ndarray,
@@ -80,24 +90,27 @@ def solve_pose(robot: Robot, frame: int, X_WT: np.ndarray, q_seed: np.ndarray, i
     The other joints keep their values from ``q_seed``.  Returns the best attempt; its
     ``success`` says whether both tolerances were met.
     """
-    target = pin.SE3(X_WT[:3, :3].copy(), X_WT[:3, 3].copy())
+    return solve_poses(robot, (frame,), (X_WT,), q_seed, idx, rng, options)
 
-    def residual(X):
-        e = pin.log6(X.actInv(target)).vector  # in the local frame
-        return e, float(np.linalg.norm(X.translation - target.translation)), float(np.linalg.norm(e[3:]))
 
-    return _solve(robot, frame, q_seed, idx, rng, options, residual, pin.LOCAL, slice(None))
+def solve_poses(robot: Robot, frames: tuple[int, ...], X_WTs: tuple[np.ndarray, ...], q_seed: np.ndarray,
+                idx: np.ndarray, rng: np.random.Generator, options: IKOptions = IKOptions()) -> IKResult:
+    """Move the joints ``idx`` so that each frame of ``frames`` reaches its pose in
+    ``X_WTs`` (each (4, 4)) at once: one least-squares problem over the stacked tasks (two
+    hands on one object, sharing the torso)."""
+    targets = [pin.SE3(X[:3, :3].copy(), X[:3, 3].copy()) for X in X_WTs]
+    return _solve(robot, tuple(frames), q_seed, idx, rng, options, _pose_residual(targets), pin.LOCAL, slice(None))
 
 
 def solve_position(robot: Robot, frame: int, p_WT: np.ndarray, q_seed: np.ndarray, idx: np.ndarray,
                    rng: np.random.Generator, options: IKOptions = IKOptions()) -> IKResult:
     """Move the joints ``idx`` so that the origin of ``frame`` reaches the point ``p_WT`` (3,)."""
 
-    def residual(X):
+    def residual(k: int, X):
         e = p_WT - X.translation
         return e, float(np.linalg.norm(e)), 0.0
 
-    return _solve(robot, frame, q_seed, idx, rng, options, residual, pin.LOCAL_WORLD_ALIGNED, slice(0, 3))
+    return _solve(robot, (frame,), q_seed, idx, rng, options, residual, pin.LOCAL_WORLD_ALIGNED, slice(0, 3))
 
 
 def _jacobian_columns(robot: Robot, J: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -113,6 +126,14 @@ def arm_ik(robot: Robot, hand: str, X_WG: np.ndarray, q_seed: np.ndarray, rng: n
     h = robot.hands[hand]
     idx = np.concatenate([robot.groups["torso"], h.arm_idx]) if with_torso else h.arm_idx
     return solve_pose(robot, h.grasp_frame, X_WG, q_seed, idx, rng, options)
+
+
+def two_arm_ik(robot: Robot, hands: tuple[str, str], X_WGs: tuple[np.ndarray, np.ndarray], q_seed: np.ndarray,
+               rng: np.random.Generator, options: IKOptions = IKOptions()) -> IKResult:
+    """Torso and both arms placing each hand's grasp frame G at its pose in ``X_WGs`` at
+    once (both hands on one object: the CG_r∩CG_l mode)."""
+    idx = np.concatenate([robot.groups["torso"], *(robot.hands[h].arm_idx for h in hands)])
+    return solve_poses(robot, tuple(robot.hands[h].grasp_frame for h in hands), X_WGs, q_seed, idx, rng, options)
 
 
 def finger_ik(robot: Robot, hand: str, finger: int, p_WT: np.ndarray, q_seed: np.ndarray,

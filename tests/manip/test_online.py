@@ -33,8 +33,8 @@ from regrasp_cli.manip.doublegrasp import cheap_order, double_grasps, environmen
 from regrasp_cli.manip.exchange import exchange_orientation, grid_nodes, wrist_path_cost
 from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, hands_collide, \
     static_geometry
-from regrasp_cli.manip.keyconf import SingleConfig, approach_axis, cartesian_line, preshapes, shoulder, \
-    single_configuration, wrist
+from regrasp_cli.manip.keyconf import SingleConfig, _backed_off, approach_axis, cartesian_line, preshapes, \
+    shoulder, single_configuration, with_fingers, wrist
 from regrasp_cli.manip.modes import Kind
 from regrasp_cli.manip.queries import QueryStats, Roadmap, roadmap_query
 from regrasp_cli.manip.solve import TransitionStats
@@ -233,13 +233,40 @@ def test_single_configuration_is_collision_free(problem, lists, single):
     assert path_collisions(held, c.lift, problem) == []
 
 
+@pytest.mark.parametrize("distance", [0.008, 0.015])
+def test_backed_off_preshape_moves_each_tip_straight_out_of_its_contact(problem, lists, single, distance):
+    """The pre-shape for low pinches: every fingertip in contact moves out of its
+    contact along the normal, by at least half of ``distance`` (its sphere centre at
+    (p_tip - p) . n >= r + d / 2 in the object frame); the fingers without contact stay
+    as they were."""
+    scratch, _ = single
+    robot, h, g = problem.robot, problem.robot.hands["right"], lists["right"]
+    kin = Kinematics(robot)
+    backed = 0
+    for k in range(6):
+        f = _backed_off(scratch, g, k, distance)
+        if f is None:
+            continue
+        backed += 1
+        q = with_fingers(scratch, robot.q_rest, "right", f)
+        X_OW = g.X_OG[k] @ inverse(kin.fk(q, h.grasp_frame))
+        for i, finger in enumerate(h.spec.fingers):
+            p_O = X_OW[:3, :3] @ kin.fk(q, h.tip_frames[i])[:3, 3] + X_OW[:3, 3]
+            if g.in_contact[k, i]:
+                assert (p_O - g.points[k, i]) @ g.normals[k, i] >= finger.tip_radius + distance / 2 - 1e-9
+            else:
+                at = [list(h.idx).index(j) for j in h.finger_idx[i]]
+                np.testing.assert_array_equal(f[at], g.finger_q[k][at])
+    assert backed >= 3  # most grasps can back off
+
+
 def test_approach_starts_open_and_ends_preshaped_at_the_grasp_pose(problem, lists, single):
     scratch, c = single
     robot, h = problem.robot, problem.robot.hands["right"]
-    closed = lists["right"].finger_q[c.grasp]
     assert np.array_equal(c.approach[0][h.idx], h.open)
     end = c.approach[-1]
-    assert any(np.allclose(end[h.idx], f, atol=1e-12) for f in preshapes(scratch, "right", closed))
+    shapes = preshapes(scratch, lists["right"], c.grasp)
+    assert any(np.allclose(end[h.idx], f, atol=1e-12) for f in shapes)
     others = np.setdiff1d(np.arange(robot.nq), h.idx)
     assert np.array_equal(end[others], c.q_closed[others])  # the hand is at the grasp pose
     # it starts approach_distance away, with the same orientation

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from regrasp_cli.model.ik import IKOptions, arm_ik, finger_ik
+from regrasp_cli.model.ik import IKOptions, arm_ik, finger_ik, two_arm_ik
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.spatial import pose_error
 
@@ -45,6 +45,25 @@ def test_arm_ik_with_torso_round_trip(robot):
         assert dp <= POS_TOL and dr <= ROT_TOL
         assert robot.within_limits(res.q)
         np.testing.assert_array_equal(res.q[robot.groups["left_arm"]], robot.q_rest[robot.groups["left_arm"]])
+
+
+def test_two_arm_ik_reaches_both_poses_at_once(robot):
+    """Both grasp frames at the poses they have in one random configuration of the torso
+    and both arms: one solve reaches both (the torso shared), nothing else moves."""
+    idx = np.concatenate([robot.groups["torso"], robot.hands["right"].arm_idx, robot.hands["left"].arm_idx])
+    frames = [robot.hands[h].grasp_frame for h in ("right", "left")]
+    targets_rng, rng = np.random.default_rng(21), np.random.default_rng(22)
+    for k in range(N_TARGETS):
+        q_target = robot.sample(targets_rng, idx)
+        X = tuple(Kinematics(robot).fk(q_target, f) for f in frames)
+        res = two_arm_ik(robot, ("right", "left"), X, robot.q_rest, rng)
+        assert res.success, (k, res.position_error, res.rotation_error)
+        for f, X_WG in zip(frames, X):
+            dp, dr = pose_error(Kinematics(robot).fk(res.q, f), X_WG)
+            assert dp <= POS_TOL and dr <= ROT_TOL, (k, dp, dr)
+        assert robot.within_limits(res.q)
+        others = np.setdiff1d(np.arange(robot.nq), idx)
+        np.testing.assert_array_equal(res.q[others], robot.q_rest[others])
 
 
 def test_arm_ik_is_deterministic_for_a_seed(robot):

@@ -181,17 +181,22 @@ def _double_grasps(scratch: Scratch, lists: dict[str, GraspList], shapes: dict, 
                     counts)
     doubles = double_grasps(cfg_g, lists[g], shapes[g], cfg_t, lists[t], shapes[t])
     n_pairs = (len(cfg_g), len(cfg_t))
-    if not doubles:  # both hands' best take the same side: search each among the other's partners
+    if len(doubles) < scratch.options.double_grasps_wanted:
+        # few pairs (a small object: both hands' best take the same side): each hand is
+        # searched again among the other's partners, and every pair of all found is scored
         rng = np.random.default_rng([seed, 20])
         cfg_t2, _ = single_configurations(scratch, rng, lists[t], shapes[t], task.X_WO_goal, env,
-                                          partners(cfg_g, lists[g], shapes[g], lists[t], shapes[t]))
-        doubles = double_grasps(cfg_g, lists[g], shapes[g], cfg_t2, lists[t], shapes[t])
-        if not doubles:
-            cfg_g2, _ = single_configurations(scratch, rng, lists[g], shapes[g], task.X_WO_start, env,
-                                              partners(cfg_t, lists[t], shapes[t], lists[g], shapes[g]))
-            doubles = double_grasps(cfg_g2, lists[g], shapes[g], cfg_t, lists[t], shapes[t])
+                                          _new(partners(cfg_g, lists[g], shapes[g], lists[t], shapes[t]), cfg_t))
+        cfg_g2, _ = single_configurations(scratch, rng, lists[g], shapes[g], task.X_WO_start, env,
+                                          _new(partners(cfg_t, lists[t], shapes[t], lists[g], shapes[g]), cfg_g))
+        doubles = double_grasps(cfg_g + cfg_g2, lists[g], shapes[g], cfg_t + cfg_t2, lists[t], shapes[t])
     counts["double_grasps"] = len(doubles)
     return doubles or f"all {n_pairs[0]} x {n_pairs[1]} grasp pairs make the hands collide", counts
+
+
+def _new(ks: np.ndarray, found: list) -> np.ndarray:
+    """The grasp indices ``ks`` without those of the configurations already ``found``."""
+    return ks[~np.isin(ks, [c.grasp for c in found])]
 
 
 def choose_hands(scratch: Scratch, lists: dict[str, GraspList], seed: int) -> tuple[str, list[DoubleGrasp], dict]:
