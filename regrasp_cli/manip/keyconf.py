@@ -386,10 +386,11 @@ def exchange_configuration(scratch: Scratch, rng: np.random.Generator, giver: Gr
                        if w_t.is_free(q) and scratch.segment_free(w_tg, q_both, q)), None)
         if q_gpre is None:
             continue
-        approach = _approach(scratch, rng, t, q_tpre, centre, w_g)
+        up = (np.array([0.0, 0.0, 1.0]),)  # from above, as a single grasp may, when the other ways are blocked
+        approach = _approach(scratch, rng, t, q_tpre, centre, w_g, up)
         if approach is None:
             continue
-        retreat = _approach(scratch, rng, g, q_gpre, centre, w_t)
+        retreat = _approach(scratch, rng, g, q_gpre, centre, w_t, up)
         if retreat is None:
             continue
         return ExchangeConfig(X_WO, approach, q_both, q_gpre, retreat[::-1])

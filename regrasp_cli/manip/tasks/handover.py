@@ -49,6 +49,7 @@ TRANSITIONS = ("grasp", "carry", "place", "rest")  # the four queries of §V-B, 
 RUN_ORDER = ("place", "rest", "grasp", "carry")  # longest first, so that two workers finish together
 STAGES = ("double grasps", "exchange", "queries", "timing")
 EXCHANGE_CLEARANCE = 0.02  # m: the object at the exchange pose keeps this from obstacles
+EXCHANGE_YAWS = np.radians([0, 0, 45, -45, 0, 90, -90, 0, 135, -135, 0, 180])  # turns of the samples, in turn
 
 
 def grasp_id(hand: str, k: int) -> str:
@@ -123,12 +124,15 @@ def exchange_pose(scratch: Scratch, dg: DoubleGrasp, lists: dict[str, GraspList]
     return (None if x is None else poses[x.tobytes()]), tested
 
 
-def _perturbed(scratch: Scratch, rng: np.random.Generator, X: np.ndarray, obj: HandShape) -> np.ndarray:
+def _perturbed(scratch: Scratch, rng: np.random.Generator, X: np.ndarray, obj: HandShape, yaw: float = 0.0) -> np.ndarray:
+    """X_WO (4, 4) turned by ``yaw`` (rad) about the vertical through the object's centre,
+    then perturbed (Gaussian, ``exchange_sigma`` and ``exchange_angle_sigma``)."""
     from scipy.spatial.transform import Rotation
 
     o = scratch.options
     c = X[:3, :3] @ obj.centres[0] + X[:3, 3]
-    R = Rotation.from_rotvec(rng.normal(0.0, o.exchange_angle_sigma, 3)).as_matrix() @ X[:3, :3]
+    R = Rotation.from_rotvec(rng.normal(0.0, o.exchange_angle_sigma, 3)).as_matrix() @ \
+        Rotation.from_rotvec([0.0, 0.0, yaw]).as_matrix() @ X[:3, :3]
     Y = np.eye(4)
     Y[:3, :3] = R
     Y[:3, 3] = c + rng.normal(0.0, o.exchange_sigma, 3) - R @ obj.centres[0]
@@ -240,7 +244,9 @@ def _exchanges(scratch: Scratch, rng: np.random.Generator, doubles: list[DoubleG
         if X_c is None:
             continue
         for s in range(o.exchange_samples):
-            X = X_c if s == 0 else _perturbed(scratch, rng, X_c, obj)
+            # around the pose of Fig. 6, then turned about the vertical (its orientation is
+            # a least-squares compromise, which two pinches from above may not reach)
+            X = X_c if s == 0 else _perturbed(scratch, rng, X_c, obj, EXCHANGE_YAWS[s % len(EXCHANGE_YAWS)])
             if s and hand_hits_static(obj, X, env, EXCHANGE_CLEARANCE):
                 continue
             ex = exchange_configuration(scratch, rng, lists[g], dg.giver.grasp, lists[t], dg.taker.grasp, X)
