@@ -338,6 +338,21 @@ def best_double(problem, lists, shapes, env):
     return doubles[0]
 
 
+@pytest.mark.parametrize("yaw", [0.0, np.pi / 4, -np.pi / 2, np.pi])
+def test_exchange_samples_turn_about_the_vertical_through_the_object_centre(problem, yaw):
+    """Without the Gaussian spread, a sample is the pose turned by ``yaw`` about the
+    vertical through the object's centre: the centre stays, the orientation is Rz(yaw) R."""
+    scratch = new_scratch(problem, exchange_sigma=0.0, exchange_angle_sigma=0.0)
+    obj = _object_shape(problem)
+    X = np.eye(4)
+    X[:3, :3] = Rotation.from_rotvec([0.3, -0.2, 1.0]).as_matrix()
+    X[:3, 3] = [0.5, 0.1, 1.0]
+    Y = handover._perturbed(scratch, np.random.default_rng(0), X, obj, yaw)
+    centre = lambda T: T[:3, :3] @ obj.centres[0] + T[:3, 3]  # noqa: E731
+    np.testing.assert_allclose(centre(Y), centre(X), atol=1e-12)
+    np.testing.assert_allclose(Y[:3, :3], Rotation.from_rotvec([0, 0, yaw]).as_matrix() @ X[:3, :3], atol=1e-12)
+
+
 def test_exchange_pose_puts_the_object_centre_on_a_free_grid_node(problem, lists, env, best_double):
     scratch = new_scratch(problem)
     robot, task = problem.robot, problem.spec.task
