@@ -7,7 +7,8 @@
 2. The survivors are ranked by a cheap score (normalised quality + approach cosine) and
    turned into single-grasp configurations (:func:`keyconf.single_configuration`) until
    ``single_per_hand`` are found: the paper's "collision-free single grasps
-   configurations" (4 right and 7 left in its scenario).
+   configurations" (4 right and 7 left in its scenario); the arm alone first, then, when
+   that leaves too few, with the torso leaning for the grasps the arm could not reach.
 3. Every pair of them is tested for hand-hand collision with both hands on the object;
    a pair's score is the normalised min of the two grasp qualities plus the normalised
    min of the two robot-configuration scores (approach cosine minus free-arm terms).
@@ -81,13 +82,18 @@ def single_configurations(scratch: Scratch, rng: np.random.Generator, grasps: Gr
         free = free[np.isin(free, only)]
     ks = cheap_order(scratch, grasps, free, X_WO)
     found, tried = [], 0
-    for k in ks[:o.grasp_attempts]:
-        tried += 1
-        c = single_configuration(scratch, rng, grasps, int(k), X_WO)
-        if c is not None:
-            found.append(c)
+    # the arm alone first, as the paper; only when that leaves too few, the torso helps
+    # with the grasps it could not reach (its postures are farther from the roadmap's)
+    for lean in (False, True):
+        for k in ks[:o.grasp_attempts]:
             if len(found) >= o.single_per_hand:
                 break
+            if any(c.grasp == k for c in found):
+                continue
+            tried += not lean
+            c = single_configuration(scratch, rng, grasps, int(k), X_WO, lean)
+            if c is not None:
+                found.append(c)
     return found, SingleStats(len(grasps), len(ks), tried, len(found))
 
 

@@ -199,17 +199,18 @@ def _backed_off(scratch: Scratch, grasps: GraspList, k: int, distance: float) ->
 
 
 def _approach(scratch: Scratch, rng: np.random.Generator, hand: str, q_pre: np.ndarray, centre_W: np.ndarray, world,
-              directions_extra: tuple[np.ndarray, ...] = ()) -> np.ndarray | None:
+              directions_extra: tuple[np.ndarray, ...] = (), last: tuple[np.ndarray, ...] = ()) -> np.ndarray | None:
     """Approach waypoints ending at ``q_pre`` (hand at the grasp pose, fingers pre-shaped),
     starting with the fingers open ``approach_distance`` away; checked in ``world``, the
-    start (a query's end) with the queries' clearance."""
+    start (a query's end) with the queries' clearance.  Directions tried: away from the
+    object's centre, ``directions_extra``, back along the hand's approach, ``last``."""
     robot, o = scratch.problem.robot, scratch.options
     h = robot.hands[hand]
     certified = scratch.certified(world)
     X_WG = scratch.kin.fk(q_pre, h.grasp_frame)
     away = X_WG[:3, 3] - centre_W
     back = -(X_WG[:3, :3] @ approach_axis(scratch, hand))
-    for d in (away, *directions_extra, back):
+    for d in (away, *directions_extra, back, *last):
         n = np.linalg.norm(d)
         if n < 1e-9:
             continue
@@ -239,16 +240,21 @@ def _sample_base(scratch: Scratch, rng: np.random.Generator, s: int, moving: np.
     return q
 
 
-def _reaches(scratch: Scratch, rng: np.random.Generator, hand: str, X_WG: np.ndarray, base: np.ndarray):
+def _reaches(scratch: Scratch, rng: np.random.Generator, hand: str, X_WG: np.ndarray, base: np.ndarray,
+             lean: bool):
     """Configurations (nq,) from ``base`` with ``hand``'s grasp frame at X_WG, lazily: the
-    arm alone (the torso as sampled), then the torso and the arm together, for what the
-    arm alone cannot reach or reaches only contorted (an object low on the desk at arm's
-    length: §V-C samples the non-grasping joints, but a humanoid leans to pick it up)."""
+    arm alone (the torso as sampled); or, with ``lean``, the torso and the arm together,
+    then from ``ik_seeds`` random postures: for what the arm alone cannot reach or
+    reaches only contorted (an object low on the desk at arm's length: §V-C samples the
+    non-grasping joints, but a humanoid leans to pick it up)."""
     robot, o = scratch.problem.robot, scratch.options
-    ik = arm_ik(robot, hand, X_WG, base, rng, options=o.ik)
-    if ik.success:
-        yield ik.q
-    if len(robot.groups["torso"]):
+    torso = bool(len(robot.groups["torso"]))
+    if not lean:
+        ik = arm_ik(robot, hand, X_WG, base, rng, options=o.ik)
+        if ik.success:
+            yield ik.q
+        return
+    if torso:
         ik = arm_ik(robot, hand, X_WG, base, rng, with_torso=True, options=o.ik)
         if ik.success:
             yield ik.q
@@ -256,33 +262,36 @@ def _reaches(scratch: Scratch, rng: np.random.Generator, hand: str, X_WG: np.nda
     for _ in range(o.ik_seeds):  # other postures (lean, elbow, wrist) for the same hand pose
         seed = base.copy()
         seed[idx] = rng.uniform(robot.lower[idx], robot.upper[idx])
-        ik = arm_ik(robot, hand, X_WG, seed, rng, with_torso=bool(len(robot.groups["torso"])), options=o.ik)
+        ik = arm_ik(robot, hand, X_WG, seed, rng, with_torso=torso, options=o.ik)
         if ik.success:
             yield ik.q
 
 
 def _reach_both(scratch: Scratch, rng: np.random.Generator, hands: tuple[str, str],
-                X_WGs: tuple[np.ndarray, np.ndarray], base: np.ndarray) -> np.ndarray | None:
-    """A configuration (nq,) from ``base`` with both hands' grasp frames at ``X_WGs``: each
-    arm alone first (the torso as sampled), then the torso and both arms solved together
-    (the torso cannot lean towards one hand without moving the other's shoulder); None
-    when neither converges."""
+                X_WGs: tuple[np.ndarray, np.ndarray], base: np.ndarray, lean: bool) -> np.ndarray | None:
+    """A configuration (nq,) from ``base`` with both hands' grasp frames at ``X_WGs``:
+    each arm alone (the torso as sampled); or, with ``lean``, the torso and both arms
+    solved together (the torso cannot lean towards one hand without moving the other's
+    shoulder); None when it does not converge."""
     robot, o = scratch.problem.robot, scratch.options
-    ik = arm_ik(robot, hands[0], X_WGs[0], base, rng, options=o.ik)
-    if ik.success:
-        ik = arm_ik(robot, hands[1], X_WGs[1], ik.q, rng, options=o.ik)
-    if not ik.success and len(robot.groups["torso"]):
+    if lean:
         ik = two_arm_ik(robot, hands, X_WGs, base, rng, options=o.ik)
+    else:
+        ik = arm_ik(robot, hands[0], X_WGs[0], base, rng, options=o.ik)
+        if ik.success:
+            ik = arm_ik(robot, hands[1], X_WGs[1], ik.q, rng, options=o.ik)
     return ik.q if ik.success else None
 
 
 # ------------------------------------------------------------------ single grasps
 
 
-def single_configuration(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: int, X_WO: np.ndarray) -> SingleConfig | None:
+def single_configuration(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: int, X_WO: np.ndarray,
+                         lean: bool = False) -> SingleConfig | None:
     """A collision-free configuration grasping the object at X_WO (resting on its support)
     with grasp ``k`` of the hand's list, with its approach and lift lines; None when the
-    samples are exhausted."""
+    samples are exhausted.  The arm alone reaches the grasp, or with ``lean`` the torso
+    helps (:func:`_reaches`)."""
     robot, o, hand = scratch.problem.robot, scratch.options, grasps.hand
     X_WG = X_WO @ grasps.X_OG[k]
     w_free = scratch.world(X_WO)
@@ -292,7 +301,7 @@ def single_configuration(scratch: Scratch, rng: np.random.Generator, grasps: Gra
                      if w_free.is_free(b)), None)  # a free arm drawn through the desk is drawn again
         if base is None:
             continue
-        for q in _reaches(scratch, rng, hand, X_WG, base):
+        for q in _reaches(scratch, rng, hand, X_WG, base, lean):
             c = _grasp_at(scratch, rng, grasps, k, X_WO, q)
             if c is not None:
                 return c
@@ -355,10 +364,12 @@ def _grasp_at(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: 
 
 
 def exchange_configuration(scratch: Scratch, rng: np.random.Generator, giver: GraspList, kg: int, taker: GraspList, kt: int,
-                           X_WO: np.ndarray) -> ExchangeConfig | None:
+                           X_WO: np.ndarray, lean: bool = False) -> ExchangeConfig | None:
     """Both hands on the object at X_WO (grasp ``kg`` of the giving hand, which holds it,
     ``kt`` of the taking hand): the hand-over of §V-B with its approach and retreat; None
-    when the samples are exhausted."""
+    when the samples are exhausted.  Each arm alone reaches its grasp (the torso
+    sampled), or with ``lean`` the torso and both arms are solved together
+    (:func:`_reach_both`)."""
     p, o = scratch.problem, scratch.options
     robot = p.robot
     g, t = giver.hand, taker.hand
@@ -372,7 +383,7 @@ def exchange_configuration(scratch: Scratch, rng: np.random.Generator, giver: Gr
     torso = robot.groups["torso"]
     for s in range(o.key_samples):
         base = _sample_base(scratch, rng, s, torso)
-        q = _reach_both(scratch, rng, (g, t), (X_WO @ X_OGg, X_WO @ X_OGt), base)
+        q = _reach_both(scratch, rng, (g, t), (X_WO @ X_OGg, X_WO @ X_OGt), base, lean)
         if q is None:
             continue
         q_both = with_fingers(scratch, with_fingers(scratch, q, g, fg), t, ft)
@@ -386,11 +397,11 @@ def exchange_configuration(scratch: Scratch, rng: np.random.Generator, giver: Gr
                        if w_t.is_free(q) and scratch.segment_free(w_tg, q_both, q)), None)
         if q_gpre is None:
             continue
-        up = (np.array([0.0, 0.0, 1.0]),)  # from above, as a single grasp may, when the other ways are blocked
-        approach = _approach(scratch, rng, t, q_tpre, centre, w_g, up)
+        up = (np.array([0.0, 0.0, 1.0]),)  # straight up, as a single grasp may, when the other ways are blocked
+        approach = _approach(scratch, rng, t, q_tpre, centre, w_g, last=up)
         if approach is None:
             continue
-        retreat = _approach(scratch, rng, g, q_gpre, centre, w_t, up)
+        retreat = _approach(scratch, rng, g, q_gpre, centre, w_t, last=up)
         if retreat is None:
             continue
         return ExchangeConfig(X_WO, approach, q_both, q_gpre, retreat[::-1])

@@ -235,25 +235,38 @@ def _exchanges(scratch: Scratch, rng: np.random.Generator, doubles: list[DoubleG
                lists: dict[str, GraspList], g: str):
     """(double grasp, exchange configuration, double grasps tried) best double grasp
     first: for each of the best ``double_grasps_tried``, the exchange pose of Fig. 6 and
-    then Gaussian samples around it until both arms reach one (a generator: the next is
-    searched only when a query of the previous one failed)."""
+    then Gaussian samples around it until both arms reach one; when none does, samples
+    turned about the vertical with the torso solved with both arms (a generator: the next
+    is searched only when a query of the previous one failed)."""
     t, o = OTHER[g], scratch.options
     env, obj = static_geometry(scratch.problem.spec.obstacles), _object_shape(scratch.problem)
     for tried, dg in enumerate(doubles[:o.double_grasps_tried], 1):
         X_c, _ = exchange_pose(scratch, dg, lists, env, obj)
         if X_c is None:
             continue
-        for s in range(o.exchange_samples):
-            # around the pose of Fig. 6, then turned about the vertical (its orientation is
-            # a least-squares compromise, which two pinches from above may not reach)
-            X = X_c if s == 0 else _perturbed(scratch, rng, X_c, obj, EXCHANGE_YAWS[s % len(EXCHANGE_YAWS)])
-            if s and hand_hits_static(obj, X, env, EXCHANGE_CLEARANCE):
-                continue
-            ex = exchange_configuration(scratch, rng, lists[g], dg.giver.grasp, lists[t], dg.taker.grasp, X)
-            if ex is not None:
-                yield dg, ex, tried
-                break
+        ex = _exchange_near(scratch, rng, dg, lists, X_c, obj, env, False)
+        ex = ex or _exchange_near(scratch, rng, dg, lists, X_c, obj, env, True)
+        if ex is not None:
+            yield dg, ex, tried
     yield None, None, min(len(doubles), o.double_grasps_tried)
+
+
+def _exchange_near(scratch: Scratch, rng: np.random.Generator, dg: DoubleGrasp, lists: dict[str, GraspList],
+                   X_c: np.ndarray, obj: HandShape, env: StaticGeometry, lean: bool) -> ExchangeConfig | None:
+    """The exchange configuration of the first of ``exchange_samples`` object poses around
+    X_c (4, 4) that both arms reach: X_c itself and Gaussian samples; with ``lean``,
+    samples turned about the vertical (the orientation of Fig. 6 is a least-squares
+    compromise, which two grasps from above may not reach) and the torso solved with
+    both arms (:func:`keyconf.exchange_configuration`)."""
+    g, t = dg.giver.hand, dg.taker.hand
+    for s in range(scratch.options.exchange_samples):
+        X = X_c if s == 0 else _perturbed(scratch, rng, X_c, obj, EXCHANGE_YAWS[s % len(EXCHANGE_YAWS)] if lean else 0.0)
+        if s and hand_hits_static(obj, X, env, EXCHANGE_CLEARANCE):
+            continue
+        ex = exchange_configuration(scratch, rng, lists[g], dg.giver.grasp, lists[t], dg.taker.grasp, X, lean)
+        if ex is not None:
+            return ex
+    return None
 
 
 def steps_of(scratch: Scratch, dg: DoubleGrasp, ex: ExchangeConfig,
