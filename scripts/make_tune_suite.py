@@ -15,6 +15,8 @@ import numpy as np
 import trimesh
 from trimesh import creation
 
+from regrasp_cli.model.objects import make_builtin
+
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "configs" / "bench" / "tune"
 DEFAULT_SCENE = ROOT / "regrasp_cli" / "data" / "scenes" / "desk_handover.yaml"
@@ -51,6 +53,7 @@ def objects() -> dict[str, trimesh.Trimesh]:
         "bent": trimesh.util.concatenate(arc),
         "cup": _shell([[0.0, 0.0], [0.03, 0.0], [0.04, 0.08]], 0.002),
     }
+    out["mug"] = make_builtin("mug")  # a tall mug with a handle (builtin:mug)
     for m in out.values():  # centred on the bounding box, as the YCB scans are
         m.apply_translation(-m.bounds.mean(axis=0))
     return out
