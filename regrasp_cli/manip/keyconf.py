@@ -129,11 +129,12 @@ def _translated(X: np.ndarray, d: np.ndarray) -> np.ndarray:
     return Y
 
 
-def cartesian_line(scratch: Scratch, rng: np.random.Generator, hand: str, q_end: np.ndarray, X_far: np.ndarray, steps: int) -> np.ndarray | None:
+def cartesian_line(scratch: Scratch, rng: np.random.Generator, hand: str, q_end: np.ndarray, X_far: np.ndarray, steps: int,
+                   lean: bool = False) -> np.ndarray | None:
     """Waypoints (steps + 1, nq) moving the hand's grasp frame on a straight line from
     X_far (orientation kept) to where it is at ``q_end``; only the arm moves.  None when
-    IK fails or the arm would jump (a branch change).  Where the arm alone cannot follow
-    the line (stretched out), the torso helps."""
+    IK fails or the arm would jump (a branch change).  With ``lean``, the torso helps
+    where the arm alone cannot follow the line (stretched out)."""
     robot = scratch.problem.robot
     h = robot.hands[hand]
     X_end = scratch.kin.fk(q_end, h.grasp_frame)
@@ -144,7 +145,7 @@ def cartesian_line(scratch: Scratch, rng: np.random.Generator, hand: str, q_end:
         X = X_end.copy()
         X[:3, 3] = X_end[:3, 3] + (X_far[:3, 3] - X_end[:3, 3]) * (i / steps)
         res = solve_pose(robot, h.grasp_frame, X, q, h.arm_idx, rng, opts)
-        if not res.success and len(robot.groups["torso"]):
+        if not res.success and lean and len(robot.groups["torso"]):
             res = solve_pose(robot, h.grasp_frame, X, q, with_torso, rng, opts)
         if not res.success or np.max(np.abs(res.q - q)) > 0.6:
             return None
@@ -199,11 +200,13 @@ def _backed_off(scratch: Scratch, grasps: GraspList, k: int, distance: float) ->
 
 
 def _approach(scratch: Scratch, rng: np.random.Generator, hand: str, q_pre: np.ndarray, centre_W: np.ndarray, world,
-              directions_extra: tuple[np.ndarray, ...] = (), last: tuple[np.ndarray, ...] = ()) -> np.ndarray | None:
+              directions_extra: tuple[np.ndarray, ...] = (), last: tuple[np.ndarray, ...] = (),
+              lean: bool = False) -> np.ndarray | None:
     """Approach waypoints ending at ``q_pre`` (hand at the grasp pose, fingers pre-shaped),
     starting with the fingers open ``approach_distance`` away; checked in ``world``, the
     start (a query's end) with the queries' clearance.  Directions tried: away from the
-    object's centre, ``directions_extra``, back along the hand's approach, ``last``."""
+    object's centre, ``directions_extra``, back along the hand's approach, ``last``; the
+    torso helps with ``lean`` (:func:`cartesian_line`)."""
     robot, o = scratch.problem.robot, scratch.options
     h = robot.hands[hand]
     certified = scratch.certified(world)
@@ -214,7 +217,8 @@ def _approach(scratch: Scratch, rng: np.random.Generator, hand: str, q_pre: np.n
         n = np.linalg.norm(d)
         if n < 1e-9:
             continue
-        line = cartesian_line(scratch, rng, hand, q_pre, _translated(X_WG, o.approach_distance * d / n), o.line_steps)
+        line = cartesian_line(scratch, rng, hand, q_pre, _translated(X_WG, o.approach_distance * d / n), o.line_steps,
+                              lean)
         if line is None or not scratch.path_free(world, line):
             continue
         q_open = with_fingers(scratch, line[0], hand, h.open)
@@ -297,12 +301,12 @@ def single_configuration(scratch: Scratch, rng: np.random.Generator, grasps: Gra
     w_free = scratch.world(X_WO)
     moving = np.concatenate([robot.groups["torso"], robot.hands[OTHER[hand]].arm_idx])
     for s in range(o.key_samples):
-        base = next((b for b in (_sample_base(scratch, rng, s, moving) for _ in range(o.base_draws))
-                     if w_free.is_free(b)), None)  # a free arm drawn through the desk is drawn again
+        draws = o.base_draws if lean else 1  # leaning, a free arm drawn through the desk is drawn again
+        base = next((b for b in (_sample_base(scratch, rng, s, moving) for _ in range(draws)) if w_free.is_free(b)), None)
         if base is None:
             continue
         for q in _reaches(scratch, rng, hand, X_WG, base, lean):
-            c = _grasp_at(scratch, rng, grasps, k, X_WO, q)
+            c = _grasp_at(scratch, rng, grasps, k, X_WO, q, lean)
             if c is not None:
                 return c
     return None
@@ -326,16 +330,19 @@ def _free_arm_clear(scratch: Scratch, rng: np.random.Generator, hand: str, q: np
 
 
 def _grasp_at(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: int, X_WO: np.ndarray,
-              q: np.ndarray) -> SingleConfig | None:
+              q: np.ndarray, lean: bool) -> SingleConfig | None:
     """The single-grasp configuration with the arm at ``q`` (grasp ``k`` reached), when the
-    closed hand, the pre-shape, the lift and the approach are free."""
+    closed hand, the pre-shape, the lift and the approach (the torso helping with
+    ``lean``) are free."""
     p, o = scratch.problem, scratch.options
     robot, hand = p.robot, grasps.hand
     X_OG = grasps.X_OG[k]
     X_WG = X_WO @ X_OG
     w_free = scratch.world(X_WO)
     w_touch = scratch.world(X_WO, touching=(hand,))
-    q_closed = _free_arm_clear(scratch, rng, hand, with_fingers(scratch, q, hand, grasps.finger_q[k]), w_touch)
+    q_closed = with_fingers(scratch, q, hand, grasps.finger_q[k])
+    q_closed = _free_arm_clear(scratch, rng, hand, q_closed, w_touch) if lean else q_closed if w_touch.is_free(q_closed) \
+        else None
     if q_closed is None:
         return None
     q = with_fingers(scratch, q_closed, hand, robot.hands[hand].open)
@@ -343,7 +350,8 @@ def _grasp_at(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: 
                   if w_free.is_free(qp) and scratch.segment_free(w_touch, qp, q_closed)), None)
     if q_pre is None:
         return None
-    lift = cartesian_line(scratch, rng, hand, q_closed, _translated(X_WG, np.array([0, 0, o.lift_height])), o.line_steps)
+    lift = cartesian_line(scratch, rng, hand, q_closed, _translated(X_WG, np.array([0, 0, o.lift_height])), o.line_steps,
+                          lean)
     if lift is None:
         return None
     lift = lift[::-1]
@@ -351,7 +359,7 @@ def _grasp_at(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: 
     if not scratch.path_free(w_held, lift) or not scratch.certified(w_held).is_free(lift[-1]):
         return None  # the top of the lift is a query's end: it keeps the queries' clearance
     centre = X_WO[:3, :3] @ p.object.mesh.centroid + X_WO[:3, 3]
-    approach = _approach(scratch, rng, hand, q_pre, centre, w_free, (np.array([0.0, 0.0, 1.0]),))
+    approach = _approach(scratch, rng, hand, q_pre, centre, w_free, (np.array([0.0, 0.0, 1.0]),), lean=lean)
     if approach is None:
         return None
     a_W = X_WG[:3, :3] @ approach_axis(scratch, hand)
@@ -398,10 +406,10 @@ def exchange_configuration(scratch: Scratch, rng: np.random.Generator, giver: Gr
         if q_gpre is None:
             continue
         up = (np.array([0.0, 0.0, 1.0]),)  # straight up, as a single grasp may, when the other ways are blocked
-        approach = _approach(scratch, rng, t, q_tpre, centre, w_g, last=up)
+        approach = _approach(scratch, rng, t, q_tpre, centre, w_g, last=up, lean=lean)
         if approach is None:
             continue
-        retreat = _approach(scratch, rng, g, q_gpre, centre, w_t, last=up)
+        retreat = _approach(scratch, rng, g, q_gpre, centre, w_t, last=up, lean=lean)
         if retreat is None:
             continue
         return ExchangeConfig(X_WO, approach, q_both, q_gpre, retreat[::-1])
