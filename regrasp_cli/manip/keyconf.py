@@ -312,15 +312,16 @@ def single_configuration(scratch: Scratch, rng: np.random.Generator, grasps: Gra
     return None
 
 
-def _free_arm_clear(scratch: Scratch, rng: np.random.Generator, hand: str, q: np.ndarray, world) -> np.ndarray | None:
+def _free_arm_clear(scratch: Scratch, rng: np.random.Generator, hand: str, q: np.ndarray, world,
+                    draws: int) -> np.ndarray | None:
     """``q`` when it is free in ``world``, else ``q`` with the free arm (the other hand's)
     drawn again around rest until it is (a torso that leans to reach can put that arm
-    through the desk), up to ``base_draws`` times; None when no draw is free."""
+    through the desk), up to ``draws`` times; None when no draw is free."""
     robot, o = scratch.problem.robot, scratch.options
     arm = robot.hands[OTHER[hand]].arm_idx
     if world.is_free(q):
         return q
-    for _ in range(o.base_draws):
+    for _ in range(draws):
         r = q.copy()
         r[arm] = np.clip(robot.q_rest[arm] + rng.normal(0.0, o.sample_sigma, len(arm)), robot.lower[arm],
                          robot.upper[arm])
@@ -340,9 +341,8 @@ def _grasp_at(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: 
     X_WG = X_WO @ X_OG
     w_free = scratch.world(X_WO)
     w_touch = scratch.world(X_WO, touching=(hand,))
-    q_closed = with_fingers(scratch, q, hand, grasps.finger_q[k])
-    q_closed = _free_arm_clear(scratch, rng, hand, q_closed, w_touch) if lean else q_closed if w_touch.is_free(q_closed) \
-        else None
+    q_closed = _free_arm_clear(scratch, rng, hand, with_fingers(scratch, q, hand, grasps.finger_q[k]), w_touch,
+                               o.base_draws if lean else 0)
     if q_closed is None:
         return None
     q = with_fingers(scratch, q_closed, hand, robot.hands[hand].open)
