@@ -16,7 +16,7 @@
    both hands' best grasps take the same side), the taking hand's configurations are
    searched again among the grasps that can share the object with one of the giver's
    (:func:`partners`, hand shapes only), the giver's among the taker's partners, and
-   every pair of all configurations found is tested and scored.
+   the new pairs among all configurations found come after the first ones.
 """
 
 from __future__ import annotations

@@ -187,13 +187,17 @@ def _double_grasps(scratch: Scratch, lists: dict[str, GraspList], shapes: dict, 
     n_pairs = (len(cfg_g), len(cfg_t))
     if len(doubles) < scratch.options.double_grasps_wanted:
         # few pairs (a small object: both hands' best take the same side): each hand is
-        # searched again among the other's partners, and every pair of all found is scored
+        # searched again among the other's partners; the new pairs come after, the
+        # giver's first configurations with the taker's new ones first
         rng = np.random.default_rng([seed, 20])
         cfg_t2, _ = single_configurations(scratch, rng, lists[t], shapes[t], task.X_WO_goal, env,
                                           _new(partners(cfg_g, lists[g], shapes[g], lists[t], shapes[t]), cfg_t))
         cfg_g2, _ = single_configurations(scratch, rng, lists[g], shapes[g], task.X_WO_start, env,
                                           _new(partners(cfg_t, lists[t], shapes[t], lists[g], shapes[g]), cfg_g))
-        doubles = double_grasps(cfg_g + cfg_g2, lists[g], shapes[g], cfg_t + cfg_t2, lists[t], shapes[t])
+        for more in (double_grasps(cfg_g, lists[g], shapes[g], cfg_t2, lists[t], shapes[t]),
+                     double_grasps(cfg_g + cfg_g2, lists[g], shapes[g], cfg_t + cfg_t2, lists[t], shapes[t])):
+            known = {(d.giver.grasp, d.taker.grasp) for d in doubles}  # those found first stay first
+            doubles += [d for d in more if (d.giver.grasp, d.taker.grasp) not in known]
     counts["double_grasps"] = len(doubles)
     return doubles or f"all {n_pairs[0]} x {n_pairs[1]} grasp pairs make the hands collide", counts
 
@@ -235,19 +239,21 @@ def _exchanges(scratch: Scratch, rng: np.random.Generator, doubles: list[DoubleG
                lists: dict[str, GraspList], g: str):
     """(double grasp, exchange configuration, double grasps tried) best double grasp
     first: for each of the best ``double_grasps_tried``, the exchange pose of Fig. 6 and
-    then Gaussian samples around it until both arms reach one; when none does, samples
-    turned about the vertical with the torso solved with both arms (a generator: the next
-    is searched only when a query of the previous one failed)."""
-    t, o = OTHER[g], scratch.options
+    then Gaussian samples around it until both arms reach one; then, for each again,
+    samples turned about the vertical with the torso solved with both arms (a generator:
+    the next is searched only when a query of the previous one failed)."""
+    o = scratch.options
     env, obj = static_geometry(scratch.problem.spec.obstacles), _object_shape(scratch.problem)
-    for tried, dg in enumerate(doubles[:o.double_grasps_tried], 1):
-        X_c, _ = exchange_pose(scratch, dg, lists, env, obj)
-        if X_c is None:
-            continue
-        ex = _exchange_near(scratch, rng, dg, lists, X_c, obj, env, False)
-        ex = ex or _exchange_near(scratch, rng, dg, lists, X_c, obj, env, True)
-        if ex is not None:
-            yield dg, ex, tried
+    centres = {}  # the pose of Fig. 6 of each double grasp, found once
+    for lean in (False, True):  # every double grasp with the arms alone first, as the paper
+        for tried, dg in enumerate(doubles[:o.double_grasps_tried], 1):
+            if tried not in centres:
+                centres[tried] = exchange_pose(scratch, dg, lists, env, obj)[0]
+            if centres[tried] is None:
+                continue
+            ex = _exchange_near(scratch, rng, dg, lists, centres[tried], obj, env, lean)
+            if ex is not None:
+                yield dg, ex, tried
     yield None, None, min(len(doubles), o.double_grasps_tried)
 
 
