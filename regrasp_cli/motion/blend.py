@@ -210,8 +210,10 @@ class Timing:
         u = accelerations(self.s, self.sd)[i]
         tau = t - self.t[i]
         s = np.minimum(self.s[i] + self.sd[i] * tau + 0.5 * u * tau * tau, self.s[i + 1])
-        s = np.where(t >= self.t[-1], self.s[-1], s)  # the end exactly
-        return s, np.maximum(self.sd[i] + u * tau, 0.0), u, s >= self.s[i + 1]
+        end = t >= self.t[-1]
+        s = np.where(end, self.s[-1], s)  # the end exactly, and its speed (at rest: 0, not a rounding error)
+        sd = np.where(end, self.sd[-1], np.maximum(self.sd[i] + u * tau, 0.0))
+        return s, sd, u, s >= self.s[i + 1]
 
 
 def accelerations(s: np.ndarray, sd: np.ndarray) -> np.ndarray:
