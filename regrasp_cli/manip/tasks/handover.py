@@ -319,7 +319,7 @@ def _keys_and_paths(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarr
             if attempt == 0:
                 raise _Failed(PlanningFailed(Stage.KEYS, f"no reachable collision-free exchange pose for the best "
                                                          f"{tried} double grasps ({o.exchange_samples} samples "
-                                                         "each)"), {}, counts)
+                                                         "each with the arms alone, as many leaning)"), {}, counts)
             break
         counts["key_attempts"] = attempt + 1
         steps, queries = steps_of(scratch, dg, ex, lists)
