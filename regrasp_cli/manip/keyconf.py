@@ -239,9 +239,16 @@ def _sample_base(scratch: Scratch, rng: np.random.Generator, s: int, moving: np.
     for h in robot.hands.values():
         q[h.idx] = h.open
     if s:
-        q[moving] = np.clip(q[moving] + rng.normal(0.0, scratch.options.sample_sigma, len(moving)),
-                            robot.lower[moving], robot.upper[moving])
+        q[moving] = _around_rest(scratch, rng, moving)
     return q
+
+
+def _around_rest(scratch: Scratch, rng: np.random.Generator, idx: np.ndarray) -> np.ndarray:
+    """Values (len(idx),) of the joints ``idx`` drawn around rest: Gaussian of
+    ``sample_sigma``, clipped to the limits."""
+    robot = scratch.problem.robot
+    return np.clip(robot.q_rest[idx] + rng.normal(0.0, scratch.options.sample_sigma, len(idx)), robot.lower[idx],
+                   robot.upper[idx])
 
 
 def _reaches(scratch: Scratch, rng: np.random.Generator, hand: str, X_WG: np.ndarray, base: np.ndarray,
@@ -317,14 +324,12 @@ def _free_arm_clear(scratch: Scratch, rng: np.random.Generator, hand: str, q: np
     """``q`` when it is free in ``world``, else ``q`` with the free arm (the other hand's)
     drawn again around rest until it is (a torso that leans to reach can put that arm
     through the desk), up to ``draws`` times; None when no draw is free."""
-    robot, o = scratch.problem.robot, scratch.options
-    arm = robot.hands[OTHER[hand]].arm_idx
+    arm = scratch.problem.robot.hands[OTHER[hand]].arm_idx
     if world.is_free(q):
         return q
     for _ in range(draws):
         r = q.copy()
-        r[arm] = np.clip(robot.q_rest[arm] + rng.normal(0.0, o.sample_sigma, len(arm)), robot.lower[arm],
-                         robot.upper[arm])
+        r[arm] = _around_rest(scratch, rng, arm)
         if world.is_free(r):
             return r
     return None
