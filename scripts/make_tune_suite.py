@@ -33,6 +33,24 @@ def _shell(profile_out: list, thickness: float) -> trimesh.Trimesh:
     return creation.revolve(outer + inner[::-1][:-1] + [[0.0, thickness]], sections=48)
 
 
+def _flat_capsule(length: float, width: float, thick: float) -> trimesh.Trimesh:
+    """A bar lying flat along x with a rounded (elliptic) rim, like a scanned tool handle."""
+    c = creation.capsule(height=length - width, radius=width / 2, count=[24, 24])
+    c.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, [0, 1, 0]))
+    c.apply_scale([1.0, 1.0, thick / width])
+    return c
+
+
+def _shears() -> trimesh.Trimesh:
+    """A blade and two finger rings lying flat: three shells, as scans are."""
+    blade = _flat_capsule(0.11, 0.02, 0.008)
+    blade.apply_translation([0.085, 0.0, 0.0])
+    rings = [creation.torus(major_radius=0.022, minor_radius=0.007) for _ in range(2)]
+    rings[0].apply_translation([-0.03, 0.022, 0.0])
+    rings[1].apply_translation([-0.03, -0.022, 0.0])
+    return trimesh.util.concatenate([blade, *rings])
+
+
 def objects() -> dict[str, trimesh.Trimesh]:
     arc = [creation.capsule(height=0.05, radius=0.017, count=[12, 12]) for _ in range(4)]
     for i, c in enumerate(arc):  # a bent fruit lying on its side: four capsules on an arc
@@ -46,6 +64,8 @@ def objects() -> dict[str, trimesh.Trimesh]:
     head.apply_translation([0.15, 0.0, 0.003])
     out = {
         "plate": creation.box(extents=[0.19, 0.045, 0.014]),  # flat, like a spanner
+        "bar": _flat_capsule(0.185, 0.025, 0.014),  # flat with a rounded rim
+        "shears": _shears(),
         "bowl": _shell([[0.0, 0.0], [0.04, 0.0], [0.075, 0.05], [0.08, 0.055]], 0.003),
         "ball": creation.icosphere(subdivisions=3, radius=0.036),
         "short_can": creation.cylinder(radius=0.034, height=0.09, sections=40),

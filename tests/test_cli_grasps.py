@@ -52,11 +52,12 @@ def test_build_prints_the_summary_and_writes_the_list(built, cache_dir):
     assert "left" not in out.split("Grasp lists")[1]  # --hand right: one row
     assert path.is_file() and path.parent == Path(cache_dir).resolve() / "grasps"
     assert f"right hand: {path}" in out
-    # the row of the summary: frames tried = positions grid x 64 orientations
+    # the row of the summary: frames tried = positions grid x 64 orientations, then (no
+    # target: every frame) the pinch frames
     row = next(ln for ln in out.splitlines() if ln.startswith("│") and ln.strip("│ ").startswith("right"))
     cells = [c.strip() for c in row.strip("│┃ ").split("│")]
-    frames, kept = int(cells[1]), int(cells[5])
-    assert frames % 64 == 0 and frames >= 8 * 64
+    frames, pinch, kept = int(cells[1]), int(cells[2]), int(cells[6])
+    assert (frames - pinch) % 64 == 0 and frames - pinch >= 8 * 64 and pinch > 0
     from regrasp_cli.grasp.build import read_grasp_list
 
     assert kept == len(read_grasp_list(path))

@@ -2,7 +2,8 @@
 
 Pipeline (fingertip hands; jaws: :mod:`.jaw`): object surface model (:mod:`.surface`) -> finger workspace spheres
 (:mod:`.workspace`, Algorithm 1, cached) -> grasp frames (:mod:`.frames`: positions in
-the object's bounding box x an incremental SO(3) grid) -> one grasp attempt per frame
+the object's bounding box x an incremental SO(3) grid; then :mod:`.pinch` frames across
+antipodal pairs, tried only when the grid leaves the list short) -> one grasp attempt per frame
 (:mod:`.single`), in parallel over forked processes -> force-closure filter and quality
 (:mod:`.quality`) -> near-duplicates removed -> sorted by quality -> HDF5 artefact.
 
@@ -16,7 +17,7 @@ is kept.  The result is deterministic for a given seed whatever the number of jo
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -26,9 +27,10 @@ from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.jaw import Jaw, antipodal_pairs, jaw_frames, jaw_geometry, jaw_grasp
 from regrasp_cli.grasp.pads import PadHand, pad_frames, pad_geometry, pad_grasp
+from regrasp_cli.grasp.pinch import pinch_frames
 from regrasp_cli.model.handshape import hand_hits_static, hand_shapes, static_geometry
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
-from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, grasp_for_frame
+from regrasp_cli.grasp.single import ContactHint, Grasp, GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
 from regrasp_cli.grasp.workspace import FingerWorkspace, WorkspaceOptions, hand_workspace
 from regrasp_cli.model.objects import mesh_sha256
@@ -40,6 +42,7 @@ from regrasp_cli.store import (Provenance, canonical_json, file_label, read_arte
 
 FORMAT, FORMAT_VERSION = "regrasp.grasps", 1
 CHUNK = 256  # frames per work item; the target is checked after each
+PINCH_WIDTH = 0.12  # m: widest antipodal pair tried for a pinch frame (the fingertips' reach decides)
 SCORE_NAMES = ("epsilon", "centroid", "ellipsoid", "curvature", "total")
 
 
@@ -75,6 +78,7 @@ class BuildReport:
     path: Path
     frames: int
     frames_palm_blocked: int
+    pinch_frames: int  # of the frames, those of the pinch pass (.pinch)
     frames_with_contacts: int  # frames that got enough contacts for the stability test
     force_closure: int
     kept: int  # after removing near-duplicates
@@ -90,14 +94,15 @@ def _params(problem: Problem, hand: str, options: BuildOptions) -> dict:
             "contact_tolerance": problem.spec.planning.contact_tolerance,
             "grasp": asdict(options.grasp), "workspace": asdict(options.workspace),
             # the list keeps the grasps usable at the task's object poses (_Usable)
-            "usable_at": {"obstacles": obstacles_sha256(problem.spec.obstacles),
+            "usable_at": {"obstacles": obstacles_sha256(problem.spec.obstacles), "fingertips_touch": True,
                           "poses": np.round([task.X_WO_start, task.X_WO_goal], 9).tolist()}}
 
 
 class _Usable:
     """Is a grasp usable in the scene's task: does the hand alone, at the grasp, clear the
     obstacles with the object at its start pose or at its goal pose (where a hand picks
-    or places it)?  A grasp from under the object goes through its support at both, and
+    or places it)?  Its fingertips may touch the support as they touch the object
+    (:mod:`model.collision`).  A grasp from under the object goes through its support at both, and
     no planner can use it (the double-grasp filter, :mod:`manip.doublegrasp`, would drop
     it): the list is filled with usable grasps instead, so its target counts what
     matters.  Memoised per grasp frame."""
@@ -106,12 +111,14 @@ class _Usable:
         self.robot, self.hand = problem.robot, hand
         self.env = static_geometry(problem.spec.obstacles)
         self.poses = (problem.spec.task.X_WO_start, problem.spec.task.X_WO_goal)
+        self.tolerance = problem.spec.planning.contact_tolerance  # the fingertips may touch the support
         self.memo: dict[int, bool] = {}
 
     def __call__(self, g: Grasp) -> bool:
         if g.frame_index not in self.memo:
-            shape = hand_shapes(self.robot, self.hand, g.finger_q)[0]
-            self.memo[g.frame_index] = any(not hand_hits_static(shape, X_WO @ g.X_OG, self.env) for X_WO in self.poses)
+            shape = hand_shapes(self.robot, self.hand, g.finger_q, self.tolerance)[0]
+            self.memo[g.frame_index] = any(not hand_hits_static(shape, X_WO @ g.X_OG, self.env, touching=True)
+                                           for X_WO in self.poses)
         return self.memo[g.frame_index]
 
 
@@ -130,6 +137,73 @@ def artefact_path(cache_dir: Path, problem: Problem, hand: str, options: BuildOp
     return Path(cache_dir) / "grasps" / f"{name}-{robot_identity(problem.robot)}-{hand}-{key}.h5"
 
 
+def _pinch_search(context: _Search) -> _Search:
+    """The search of the pinch pass (:mod:`.pinch`): the grid's frames followed by pinch
+    frames (so frame indices stay unique), on a surface sampled twice as finely (a 14 mm
+    rim gets one row of samples at the grid's step), of which only the samples where a
+    fingertip clears the support at the start or goal pose are kept.  Half the pairs are
+    levelled with each pose's vertical."""
+    problem, options = context.problem, context.options
+    rng = np.random.default_rng([options.seed, 1])
+    h = context.hand_model.hand
+    spec, thumb, ws = h.spec, h.opposing, context.workspaces
+    r_tip = min(f.tip_radius for f in spec.fingers)
+    surface = build_surface(problem.object.mesh, sampling_step(r_tip) / 2, rng)
+    grid = context.surface  # curvature read from its samples, so that the scores of both passes compare
+    surface = replace(surface, curvature=grid.curvature[grid.tree.query(surface.points)[1]])
+    among = _tips_clear(problem, surface, r_tip)
+    pairs = []
+    for X_WO in (problem.spec.task.X_WO_start, problem.spec.task.X_WO_goal):
+        p1, n1, p2, n2 = antipodal_pairs(problem.object.mesh, surface, problem.spec.object.friction, (0.0, PINCH_WIDTH),
+                                         options.grasp.pinch_frames // 2, rng, among=among, level=X_WO[2, :3])
+        keep = _tips_clear(problem, surface, r_tip, p2, n2)  # the second fingertip clears it too
+        pairs.append((p1[keep], n1[keep], p2[keep], n2[keep]))
+    p1, n1, p2, n2 = (np.concatenate(x) for x in zip(*pairs))
+    # contacts only where a fingertip clears the support (a pinch on a flat object whose
+    # other fingers take contacts low on its rim goes through the desk), plus the rays' hits
+    surface = surface.subset(among).plus(p2, n2, grid.curvature[grid.tree.query(p2)[1]])
+    others = [f for f in range(len(ws)) if f != thumb]
+    frames, pair, finger = pinch_frames(ws[thumb], [ws[f] for f in others],
+                                        (spec.fingers[thumb].tip_radius, [spec.fingers[f].tip_radius for f in others]),
+                                        p1, n1, p2, n2, rng)
+    n = len(context.frames)
+    hints = {n + k: ContactHint(others[f], p1[j], n1[j], p2[j], n2[j]) for k, (j, f) in enumerate(zip(pair, finger))}
+    return context._replace(surface=surface, frames=np.concatenate([context.frames, frames]), hints=hints)
+
+
+def _tips_clear(problem: Problem, surface: Surface, r_tip: float, points: np.ndarray | None = None,
+                normals: np.ndarray | None = None) -> np.ndarray:
+    """Indices of the contacts (the surface samples, or ``points`` and ``normals`` (k, 3)
+    in O) where a fingertip of radius ``r_tip`` touching the object clears the obstacles
+    (up to the contact tolerance it may touch them with) at the task's start or goal pose:
+    the pinches a hand can use there (:class:`_Usable`)."""
+    import coal
+
+    from regrasp_cli.model.handshape import _tf
+
+    p = surface.points if points is None else points
+    n = surface.normals if normals is None else normals
+    env = static_geometry(problem.spec.obstacles)
+    radius = r_tip - problem.spec.planning.contact_tolerance
+    sphere = coal.Sphere(radius)
+    task = problem.spec.task
+    clear = np.zeros(len(p), dtype=bool)
+    for X_WO in (task.X_WO_start, task.X_WO_goal):
+        c_W = (p + r_tip * n) @ X_WO[:3, :3].T + X_WO[:3, 3]
+        near = np.linalg.norm(c_W[:, None] - env.centres[None], axis=2) <= radius + env.radii[None]
+        for k in np.flatnonzero(~clear):
+            hit = False
+            for b in np.flatnonzero(near[k]):
+                req, res = coal.CollisionRequest(), coal.CollisionResult()
+                X = np.eye(4)
+                X[:3, 3] = c_W[k]
+                if coal.collide(sphere, _tf(X), env.geometries[b], _tf(env.X_W[b]), req, res) > 0:
+                    hit = True
+                    break
+            clear[k] = not hit
+    return np.flatnonzero(clear)
+
+
 # ------------------------------------------------------------------ per-process work
 
 
@@ -143,6 +217,7 @@ class _Search(NamedTuple):
     rho: float  # m: torque scale (half the object's bounding-box diagonal)
     frames: np.ndarray  # (n, 4, 4) candidate grasp frames X_OG
     options: BuildOptions
+    hints: dict | None = None  # frame index -> ContactHint (pinch frames)
 
 
 def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> _Search:
@@ -171,7 +246,7 @@ def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> 
 
 
 def _run_chunk(context: _Search, indices: np.ndarray):
-    problem, surface, ws, hm, rho, frames, options = context
+    problem, surface, ws, hm, rho, frames, options, hints = context
     friction = problem.spec.object.friction
     grasps, stats = [], {}
     for i in indices:
@@ -180,7 +255,8 @@ def _run_chunk(context: _Search, indices: np.ndarray):
         elif isinstance(ws, PadHand):
             g, st = pad_grasp(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
         else:
-            g, st = grasp_for_frame(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
+            g, st = grasp_for_frame(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp,
+                                    None if hints is None else hints.get(int(i)))
         for k, v in st.items():
             stats[k] = stats.get(k, 0) + v
         if g is not None:
@@ -232,18 +308,32 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     # (about 1 s each); chunks still in flight when the target is reached are dropped.
     jaw = isinstance(context.workspaces, (Jaw, PadHand))  # their frames come in random order already
     order = np.arange(n) if jaw else _frame_order(n // options.grasp.n_orientations, options.grasp.n_orientations)
-    chunks = [order[i:i + CHUNK] for i in range(0, n, CHUNK)]
-    outputs = ordered_map(_run_chunk, chunks, options.jobs, context)
-    for chunk, out in zip(chunks, outputs):
-        results.append(out)
-        done += len(chunk)
-        kept = [g for g in remove_duplicates([g for gs, _ in results for g in gs], options.grasp.duplicate_distance,
-                                             options.grasp.duplicate_angle) if usable(g)]
-        if progress:
-            progress(done, n, len(kept))
-        if options.grasp.target and len(kept) >= options.grasp.target:
-            break
-    outputs.close()  # stops the workers still busy with chunks we do not need
+
+    def search(context: _Search, order: np.ndarray, total: int) -> bool:
+        """Run the frames of ``order``; True once the target is reached."""
+        nonlocal kept, done
+        chunks = [order[i:i + CHUNK] for i in range(0, len(order), CHUNK)]
+        outputs = ordered_map(_run_chunk, chunks, options.jobs, context)
+        try:
+            for chunk, out in zip(chunks, outputs):
+                results.append(out)
+                done += len(chunk)
+                kept = [g for g in remove_duplicates([g for gs, _ in results for g in gs],
+                                                     options.grasp.duplicate_distance, options.grasp.duplicate_angle)
+                        if usable(g)]
+                if progress:
+                    progress(done, total, len(kept))
+                if options.grasp.target and len(kept) >= options.grasp.target:
+                    return True
+            return False
+        finally:
+            outputs.close()  # stops the workers still busy with chunks we do not need
+
+    done_grid = None
+    if not search(context, order, n) and not jaw and options.grasp.pinch_frames:
+        done_grid = done
+        pinch = _pinch_search(context)  # the grid left the list short: pinch frames (.pinch)
+        search(pinch, np.arange(n, len(pinch.frames)), len(pinch.frames))
     t_frames = time.perf_counter() - t1
 
     t2 = time.perf_counter()
@@ -259,7 +349,8 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     t_write = time.perf_counter() - t2
 
     tested = len(grasps) + stats.get("not_force_closure", 0)
-    report = BuildReport(hand, path, done, stats.get("palm", 0), tested + stats.get("hand_collision", 0),
+    report = BuildReport(hand, path, done, stats.get("palm", 0), 0 if done_grid is None else done - done_grid,
+                         tested + stats.get("hand_collision", 0),
                          len(grasps), len(kept),
                          {"surface + workspace + frames": t_prep, "grasp search (frames)": t_frames,
                           "duplicates + write": t_write})

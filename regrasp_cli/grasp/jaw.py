@@ -142,19 +142,31 @@ def jaw_geometry(hm: HandModel) -> Jaw:
 
 
 def antipodal_pairs(mesh: trimesh.Trimesh, surface: Surface, friction: float, width: tuple[float, float],
-                    n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    n: int, rng: np.random.Generator,
+                    among: np.ndarray | None = None,
+                    level: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Up to ``n`` samples' antipodal pairs: points p1, p2 (k, 3) and outward normals n1,
-    n2 (k, 3) in O with p2 - p1 inside both friction cones and |p2 - p1| in ``width``."""
-    i = rng.choice(len(surface.points), size=n, replace=n > len(surface.points))  # tilts differ
+    n2 (k, 3) in O with p2 - p1 inside both friction cones and |p2 - p1| in ``width``;
+    p1 drawn among the surface samples of index ``among`` (default: all).  The ray from
+    p1 goes along -n1, or with ``level`` (a unit vector in O, the support's normal) along
+    -n1 levelled (its component along ``level`` removed: the pinch across a flat object
+    lying on its support), tilted at random by up to half the friction angle."""
+    among = np.arange(len(surface.points)) if among is None else among
+    if not len(among):
+        return (np.empty((0, 3)),) * 4
+    i = among[rng.choice(len(among), size=n, replace=n > len(among))]  # tilts differ
     p1, n1 = surface.points[i], surface.normals[i]
-    # directions into the object: -n1 tilted by up to half the friction angle
+    a = n1 if level is None else n1 - np.outer(n1 @ level, level)
+    ok = np.linalg.norm(a, axis=1) > 0.1  # a level ray from a face parallel to the support: none
+    i, p1, n1, a = i[ok], p1[ok], n1[ok], a[ok] / np.linalg.norm(a[ok], axis=1, keepdims=True)
+    # directions into the object: -a tilted by up to half the friction angle
     half = 0.5 * np.arctan(friction)
-    e1 = np.cross(n1, [1.0, 0.0, 0.0])
-    e1[np.linalg.norm(e1, axis=1) < 1e-6] = np.cross(n1[np.linalg.norm(e1, axis=1) < 1e-6], [0.0, 1.0, 0.0])
+    e1 = np.cross(a, [1.0, 0.0, 0.0])
+    e1[np.linalg.norm(e1, axis=1) < 1e-6] = np.cross(a[np.linalg.norm(e1, axis=1) < 1e-6], [0.0, 1.0, 0.0])
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(n1, e1)
+    e2 = np.cross(a, e1)
     phi, tilt = rng.uniform(0, 2 * np.pi, len(i)), np.tan(rng.uniform(0, half, len(i)))
-    d = -n1 + tilt[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
+    d = -a + tilt[:, None] * (np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     loc, ray, tri = mesh.ray.intersects_location(p1 + 1e-5 * d, d, multiple_hits=False)
     p2 = np.full_like(p1, np.nan)

@@ -44,6 +44,7 @@ class GraspOptions:
     ik_iterations: int = 30
     cone_edges: int = 8  # linearised friction cone
     antipodal_samples: int = 4096  # jaws: surface samples that cast a ray for an antipodal pair (grasp.jaw)
+    pinch_frames: int = 4096  # fingertip hands: such samples for the pinch frames after the grid (grasp.pinch)
     duplicate_distance: float = 0.01  # m: grasps closer than this (hand position) ...
     duplicate_angle: float = 0.2  # rad: ... and this (hand orientation) are duplicates
     weights: QualityWeights = QualityWeights()
@@ -213,9 +214,30 @@ def _candidates(ws: FingerWorkspace, vox: SphereVoxels, surface: Surface, p_G: n
     return p[keep][order], n[keep][order], near[keep][order]
 
 
+@dataclass(frozen=True)
+class ContactHint:
+    """Contacts to try first (frame O): ``p1, n1`` for the opposing finger, ``p2, n2`` for
+    finger ``finger`` (a pinch frame's antipodal pair, :mod:`.pinch`)."""
+
+    finger: int
+    p1: np.ndarray
+    n1: np.ndarray
+    p2: np.ndarray
+    n2: np.ndarray
+
+
+def _with_hint(p: np.ndarray, n: np.ndarray, near: np.ndarray, ws: FingerWorkspace, X_OG: np.ndarray,
+               r_tip: float, hp: np.ndarray, hn: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The candidates with the hinted contact (hp, hn) first."""
+    tip_G = (hp + r_tip * hn - X_OG[:3, 3]) @ X_OG[:3, :3]
+    return np.vstack([hp, p]), np.vstack([hn, n]), np.concatenate([[ws.tree.query(tip_G)[1]], near])
+
+
 def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surface: Surface, X_OG: np.ndarray,
-                    frame_index: int, friction: float, rho: float, options: GraspOptions) -> tuple[Grasp | None, dict]:
-    """The grasp of one grasp frame, or None; plus counters for the summary."""
+                    frame_index: int, friction: float, rho: float, options: GraspOptions,
+                    hint: ContactHint | None = None) -> tuple[Grasp | None, dict]:
+    """The grasp of one grasp frame, or None; plus counters for the summary.  With a
+    ``hint``, its contacts are tried first for its two fingers."""
     robot, h = hm.robot, hm.hand
     stats = {"contacts": 0, "ik": 0, "collisions": 0, "palm": 0, "few_contacts": 0, "hand_collision": 0,
              "not_force_closure": 0}
@@ -241,6 +263,9 @@ def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surf
         anchor = (points[thumb], normals[thumb]) if placed else None  # the thumb's contact
         p, n, near = _candidates(ws, voxels[f], surface, p_G, X_OG, r_tip, anchor,
                                  options.candidates_per_finger)
+        if hint is not None and f in (thumb, hint.finger):
+            hp, hn = (hint.p1, hint.n1) if f == thumb else (hint.p2, hint.n2)
+            p, n, near = _with_hint(p, n, near, ws, X_OG, r_tip, hp, hn)
         stats["contacts"] += len(p)
         for k in range(len(p)):
             target_O = p[k] + r_tip * n[k]

@@ -128,6 +128,19 @@ class Surface:
     def __len__(self) -> int:
         return int(len(self.points))
 
+    def subset(self, idx: np.ndarray) -> "Surface":
+        """The samples of index ``idx`` only (same mass centre, curvature scale, step)."""
+        idx = np.asarray(idx, dtype=np.int64)
+        return Surface(self.points[idx], self.normals[idx], self.curvature[idx], self.face_index[idx],
+                       cKDTree(self.points[idx]), self.mass_centre, self.step, self.watertight)
+
+    def plus(self, points: np.ndarray, normals: np.ndarray, curvature: np.ndarray) -> "Surface":
+        """These samples and the given ones ((k, 3), (k, 3), (k,); face index -1)."""
+        return Surface(np.vstack([self.points, points]), np.vstack([self.normals, normals]),
+                       np.concatenate([self.curvature, curvature]),
+                       np.concatenate([self.face_index, np.full(len(points), -1, dtype=self.face_index.dtype)]),
+                       cKDTree(np.vstack([self.points, points])), self.mass_centre, self.step, self.watertight)
+
     def within(self, centre, radius: float) -> np.ndarray:
         """Sorted indices of the samples within ``radius`` (m) of ``centre`` ((3,), m)."""
         idx = self.tree.query_ball_point(np.asarray(centre, dtype=float), float(radius))

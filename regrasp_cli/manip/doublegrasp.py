@@ -54,9 +54,10 @@ def _normalise(x: np.ndarray) -> np.ndarray:
 
 
 def environment_free(grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarray, env: StaticGeometry) -> np.ndarray:
-    """Indices of the grasps whose hand at X_WO @ X_OG touches no obstacle."""
-    return np.array([k for k in range(len(grasps)) if not hand_hits_static(shapes[k], X_WO @ grasps.X_OG[k], env)],
-                    dtype=int)
+    """Indices of the grasps whose hand at X_WO @ X_OG touches no obstacle (but with its
+    fingertips, as it touches the object)."""
+    return np.array([k for k in range(len(grasps))
+                     if not hand_hits_static(shapes[k], X_WO @ grasps.X_OG[k], env, touching=True)], dtype=int)
 
 
 def cheap_order(scratch: Scratch, grasps: GraspList, ks: np.ndarray, X_WO: np.ndarray) -> np.ndarray:

@@ -14,6 +14,9 @@ Pairs checked:
   listed in robot.yaml);
 * robot-obstacle: every moving robot geometry against every obstacle (geometries fixed to
   the robot's root never move, so touching a support is the user's design, not a collision);
+  the fingertips of the hands in ``touching`` may touch an obstacle as they touch the
+  object, up to ``contact_tolerance``: a hand pinching a flat object on a desk rests its
+  fingertips on the desk (docs/DESIGN-NOTES.md, "Fingertips on the support");
 * object-robot: every robot geometry; the fingertips of the hands in ``touching`` may
   penetrate the object by up to ``contact_tolerance`` (a precision grasp touches it);
 * object-obstacle: only when the object moves with a hand; it may rest on a support with
@@ -228,18 +231,21 @@ def collision_model(robot: Robot, obstacles: Sequence[ObstacleSpec] = (),
         for b in range(a + 1, n_robot):
             if frozenset((link[a], link[b])) not in disabled and link[a] != link[b]:
                 add(a, b, link[a], link[b])
+    touch = {}  # geometry -> its eroded copy, for the fingertips of the hands touching the object
+    if obj is not None:
+        touching = set(obj.touching) | ({obj.attached_to} if obj.attached_to else set())
+        tips = {robot.model.frames[f].name for h in touching for f in robot.hands[h].tip_frames}
+        touch = {a: _eroded(gm, alias, a, options.contact_tolerance) for a in range(n_robot) if link[a] in tips}
     for a in range(n_robot):
         if gm.geometryObjects[a].parentJoint == 0:
             continue  # fixed to the root: never moves
         for o in obstacle_geoms:
-            add(a, o, link[a], obstacle_name[o])
+            if keep(link[a], obstacle_name[o]):
+                gm.addCollisionPair(pin.CollisionPair(touch.get(a, a), o))
     if obj is not None:
-        touching = set(obj.touching) | ({obj.attached_to} if obj.attached_to else set())
-        tips = {robot.model.frames[f].name for h in touching for f in robot.hands[h].tip_frames}
         for a in range(n_robot):
             if keep(link[a], "object"):
-                g = _eroded(gm, alias, a, options.contact_tolerance) if link[a] in tips else a
-                gm.addCollisionPair(pin.CollisionPair(g, object_geom))
+                gm.addCollisionPair(pin.CollisionPair(touch.get(a, a), object_geom))
         if obj.attached_to is not None:
             for o in obstacle_geoms:
                 if keep("object", obstacle_name[o]):

@@ -6,6 +6,10 @@ holding the object): only the palm and fingers matter there, and placing them di
 (object pose x grasp) is far cheaper than solving the arm's IK first.  Geometries are
 checked with coal after a vectorised bounding-sphere test, which rejects almost every
 pair at these distances.
+
+A hand holding the object may rest its fingertips on an obstacle as on the object, up to
+the contact tolerance (:mod:`model.collision`): ``hand_hits_static(..., touching=True)``
+checks the fingertips eroded by the tolerance the shapes were made with.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ import numpy as np
 import pinocchio as pin
 
 from regrasp_cli.config import ObstacleSpec
-from regrasp_cli.model.collision import obstacle_geometry
+from regrasp_cli.model.collision import eroded_geometry, obstacle_geometry
 from regrasp_cli.model.robot import Robot
 from regrasp_cli.spatial import inverse
 
@@ -30,6 +34,7 @@ class HandShape:
     X_GL: np.ndarray  # (n, 4, 4) geometry poses in the grasp frame G
     centres: np.ndarray  # (n, 3) bounding-sphere centres in G, m
     radii: np.ndarray  # (n,) bounding-sphere radii, m
+    touch_geometries: tuple[coal.CollisionGeometry, ...]  # the fingertips eroded by the contact tolerance
 
 
 def palm_and_finger_links(robot: Robot, hand: str) -> set[str]:
@@ -40,14 +45,18 @@ def palm_and_finger_links(robot: Robot, hand: str) -> set[str]:
             if go.parentJoint in joints}
 
 
-def hand_shapes(robot: Robot, hand: str, finger_values: np.ndarray) -> list[HandShape]:
-    """The hand's geometries posed in G, for each row of finger values (k, n_hand_joints)."""
+def hand_shapes(robot: Robot, hand: str, finger_values: np.ndarray, contact_tolerance: float = 0.0) -> list[HandShape]:
+    """The hand's geometries posed in G, for each row of finger values (k, n_hand_joints);
+    their fingertips shrunk by ``contact_tolerance`` (m) for checks of a hand that touches."""
     h, model = robot.hands[hand], robot.model
     data, gm = model.createData(), robot.collision_model
     gd = gm.createData()
     joints = {model.getJointId(robot.joint_names[i]) for i in h.idx} | {model.frames[h.grasp_frame].parentJoint}
     ids = [g for g, go in enumerate(gm.geometryObjects) if go.parentJoint in joints]
     geoms = tuple(gm.geometryObjects[g].geometry for g in ids)
+    tips = {model.frames[t].name for t in h.tip_frames}
+    touch = tuple((eroded_geometry(g, contact_tolerance) if contact_tolerance > 0 else None) or g
+                  if model.frames[gm.geometryObjects[i].parentFrame].name in tips else g for i, g in zip(ids, geoms))
     for g in geoms:
         g.computeLocalAABB()
     c_L = np.array([g.aabb_local.center() for g in geoms])
@@ -61,7 +70,7 @@ def hand_shapes(robot: Robot, hand: str, finger_values: np.ndarray) -> list[Hand
         X_GW = inverse(data.oMf[h.grasp_frame].homogeneous)
         X = np.array([X_GW @ gd.oMg[g].homogeneous for g in ids])
         centres = np.einsum("nij,nj->ni", X[:, :3, :3], c_L) + X[:, :3, 3]
-        out.append(HandShape(geoms, X, centres, radii))
+        out.append(HandShape(geoms, X, centres, radii, touch))
     return out
 
 
@@ -98,10 +107,14 @@ def static_geometry(obstacles: tuple[ObstacleSpec, ...]) -> StaticGeometry:
                           np.array(radii))
 
 
-def hand_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry, clearance: float = 0.0) -> bool:
-    """Does the hand at X_WG (4, 4) touch an obstacle (or come within ``clearance``)?"""
+def hand_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry, clearance: float = 0.0,
+                     touching: bool = False) -> bool:
+    """Does the hand at X_WG (4, 4) touch an obstacle (or come within ``clearance``)?
+    With ``touching`` (the hand holds the object), its fingertips may touch, up to the
+    tolerance of :func:`hand_shapes`."""
     if not len(env.geometries):
         return False
+    geometries = shape.touch_geometries if touching else shape.geometries
     c = shape.centres @ X_WG[:3, :3].T + X_WG[:3, 3]
     d = np.linalg.norm(c[:, None] - env.centres[None], axis=2)
     near = np.argwhere(d <= shape.radii[:, None] + env.radii[None] + clearance)
@@ -109,9 +122,9 @@ def hand_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry, cl
         X = X_WG @ shape.X_GL[a]
         if clearance > 0:
             req, res = coal.DistanceRequest(), coal.DistanceResult()
-            if coal.distance(shape.geometries[a], _tf(X), env.geometries[b], _tf(env.X_W[b]), req, res) < clearance:
+            if coal.distance(geometries[a], _tf(X), env.geometries[b], _tf(env.X_W[b]), req, res) < clearance:
                 return True
-        elif _collide(shape.geometries[a], X, env.geometries[b], env.X_W[b]):
+        elif _collide(geometries[a], X, env.geometries[b], env.X_W[b]):
             return True
     return False
 

@@ -319,15 +319,16 @@ def test_other_options_are_refused(problem, built):
 
 def test_every_stored_grasp_is_usable_at_the_start_or_the_goal(problem, glist):
     """The list keeps the grasps a hand can use in the scene's task: with the object at its
-    start or goal pose on the desk, the hand at the grasp touches no obstacle (a grasp from
-    under the statuette goes through the desk at both and is not stored)."""
+    start or goal pose on the desk, the hand at the grasp touches no obstacle but with its
+    fingertips, within the contact tolerance (a grasp from under the statuette goes through
+    the desk at both and is not stored)."""
     from regrasp_cli.model.handshape import hand_hits_static, hand_shapes, static_geometry
 
     env = static_geometry(problem.spec.obstacles)
     task = problem.spec.task
-    shapes = hand_shapes(problem.robot, HAND, glist.finger_q)
+    shapes = hand_shapes(problem.robot, HAND, glist.finger_q, problem.spec.planning.contact_tolerance)
     for k, shape in enumerate(shapes):
-        assert any(not hand_hits_static(shape, X_WO @ glist.X_OG[k], env)
+        assert any(not hand_hits_static(shape, X_WO @ glist.X_OG[k], env, touching=True)
                    for X_WO in (task.X_WO_start, task.X_WO_goal)), k
 
 

@@ -177,6 +177,37 @@ def test_a_hand_from_below_hits_the_desk_top(problem, lists, shapes):
     assert not hand_hits_static(hand, translated(X_WO, [0, 0, 0.3]) @ X_OG, static_geometry(problem.spec.obstacles))
 
 
+def test_a_touching_hand_may_rest_its_fingertips_on_the_desk(problem):
+    """The shapes' fingertips are eroded by the contact tolerance for a hand that touches
+    (and only they); a tip 1 mm into the desk then clears it, 3 mm does not."""
+    import coal
+
+    robot, tol = problem.robot, 0.002
+    h = robot.hands["right"]
+    shape = hand_shapes(robot, "right", h.open, tol)[0]
+    names = [robot.model.frames[go.parentFrame].name for go in robot.collision_model.geometryObjects
+             if go.parentJoint in {robot.model.getJointId(robot.joint_names[i]) for i in h.idx}
+             | {robot.model.frames[h.grasp_frame].parentJoint}]
+    tips = {robot.model.frames[t].name for t in h.tip_frames}
+    assert len(names) == len(shape.geometries) and tips <= set(names)
+    for name, g, t in zip(names, shape.geometries, shape.touch_geometries):
+        if name in tips:
+            assert isinstance(t, coal.Sphere) and t.radius == pytest.approx(g.radius - tol)
+        else:
+            assert t is g
+    # the index tip alone, 1 mm or 3 mm into a desk under it
+    i = names.index(robot.spec.hands["right"].fingers[1].tip_link)
+    tip = HandShape((shape.geometries[i],), shape.X_GL[i:i + 1], shape.centres[i:i + 1], shape.radii[i:i + 1],
+                    (shape.touch_geometries[i],))
+    r = shape.geometries[i].radius
+    for depth, hits in ((0.001, False), (0.003, True)):
+        X_WG = np.eye(4)
+        X_WG[:3, 3] = -shape.X_GL[i][:3, 3] + [0.72, 0.0, 0.74 + r - depth]  # the tip's centre above the desk top
+        desk = static_geometry((obstacle(problem, "desk_top"),))
+        assert hand_hits_static(tip, X_WG, desk)  # not touching: any contact collides
+        assert hand_hits_static(tip, X_WG, desk, touching=True) == hits, depth
+
+
 def test_environment_filter_drops_the_grasps_that_hit_the_desk(problem, lists, env):
     """A list with a grasp from below appended: at the start pose (on the desk) the filter
     keeps exactly the grasps whose hand touches no obstacle (brute force), the one from

@@ -230,6 +230,31 @@ def test_fingertip_contact_not_allowed(problem, penetration, touching):
     assert w.colliding_pairs(q) == [(_tip_link(problem), "object")]
 
 
+def _tip_on_obstacle_world(problem, penetration: float, touching):
+    """A 2 cm ball obstacle just beyond the right index fingertip sphere, along the finger,
+    overlapping it by ``penetration`` (m); the object far away, touched by ``touching``."""
+    robot = problem.robot
+    finger = robot.spec.hands["right"].fingers[1]
+    X_tip = Kinematics(robot).fk(robot.q_rest, finger.tip_link)
+    u = X_tip[:3, 3] - Kinematics(robot).fk(robot.q_rest, finger.joints[-1])[:3, 3]
+    u /= np.linalg.norm(u)
+    ball = _ball("desk", 0.02, X_tip[:3, 3] + u * (finger.tip_radius + 0.02 - penetration))
+    obj = ObjectPlacement(trimesh.creation.box(extents=[0.01, 0.01, 0.01]), _pose(np.eye(3), [3.0, 0.0, 0.0]),
+                          touching=touching)
+    return collision_world(robot, [ball], problem.disabled.links(), obj,
+                           CollisionOptions(contact_tolerance=0.002, support_tolerance=0.002))
+
+
+def test_fingertips_of_a_touching_hand_may_rest_on_an_obstacle(problem):
+    """A hand in contact with the object may rest its fingertips on the support (a pinch on
+    a desk), as on the object, up to the contact tolerance; no other hand or link may."""
+    q = problem.robot.q_rest
+    assert _tip_on_obstacle_world(problem, 0.001, ("right",)).is_free(q)
+    for penetration, touching in ((0.001, ()), (0.001, ("left",)), (0.003, ("right",))):
+        w = _tip_on_obstacle_world(problem, penetration, touching)
+        assert w.colliding_pairs(q) == [(_tip_link(problem), "obstacle:desk")], (penetration, touching)
+
+
 def _held_cube_world(problem, support_gap: float, obstacles=()):
     """A 2 cm cube held by the right hand (at its grasp frame, axes aligned with W), and a
     4 x 4 x 2 cm support whose top is ``support_gap`` below the cube's bottom face."""

@@ -84,7 +84,7 @@ def _object_shape(problem: Problem) -> HandShape:
 
     g = mesh_geometry(problem.object.mesh)
     g.computeLocalAABB()
-    return HandShape((g,), np.eye(4)[None], np.array([g.aabb_local.center()]), np.array([float(g.aabb_radius)]))
+    return HandShape((g,), np.eye(4)[None], np.array([g.aabb_local.center()]), np.array([float(g.aabb_radius)]), (g,))
 
 
 def exchange_pose(scratch: Scratch, dg: DoubleGrasp, lists: dict[str, GraspList], env: StaticGeometry,
@@ -217,7 +217,8 @@ def choose_hands(scratch: Scratch, lists: dict[str, GraspList], seed: int) -> tu
                                                        f"was found for it (`regrasp grasps build --hand {h}` says "
                                                        "why)"), {}, {})
     env = static_geometry(problem.spec.obstacles)
-    shapes = {h: hand_shapes(problem.robot, h, lists[h].finger_q) for h in ("right", "left")}
+    shapes = {h: hand_shapes(problem.robot, h, lists[h].finger_q, problem.spec.planning.contact_tolerance)
+              for h in ("right", "left")}
     guess = picking_hand(problem, scratch)
     failures, counts = [], {"single_checks": 0}
     for g in (guess, OTHER[guess]):

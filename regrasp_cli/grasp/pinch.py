@@ -1,0 +1,105 @@
+"""Pinch frames: grasp frames that put the opposing finger and one other across an
+antipodal pair of the object's surface (fingertip hands).
+
+The grid of §IV-A-1 (Saut et al. 2010) places the grasp frame at a few positions of the
+object's bounding box.  On a thin feature (the handle of a flat tool lying on a desk, the
+rim of a bowl) almost no grid frame brings two opposed fingertips onto it: a 14 mm thick
+spanner gets no force-closure grasp at all from the 16,384 grid frames.  A pinch frame
+starts from the contacts instead, as the antipodal sampling of parallel-jaw grasps does
+(:func:`grasp.jaw.antipodal_pairs`): for a pair (p1, n1), (p2, n2) it picks two workspace
+samples, one of the opposing finger (the thumb) and one of another finger, whose
+fingertip centres are as far apart as the targets ``p1 + r n1`` and ``p2 + r n2`` and
+which close towards each other, and maps them onto the targets (turned about the pair's
+axis by a few rolls).  The usual search of :mod:`.single` then runs from that frame,
+trying the pair's two contacts first for those two fingers, so a pinch frame yields a
+grasp only on the same terms as a grid frame.  They are tried after
+the grid, when it left the list short (:mod:`.build`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from regrasp_cli.grasp.workspace import FingerWorkspace
+
+PAIR_SAMPLES = 400  # workspace samples per finger from which tip pairs are drawn
+CLOSING_COS = 0.3  # both fingertips close towards each other at least this squarely
+
+
+def _axis_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rotations (k, 3, 3) turning unit vectors a (k, 3) onto b (k, 3) (Rodrigues, the
+    shortest arc; a half turn about a perpendicular axis when they are opposite)."""
+    v = np.cross(a, b)
+    c = np.einsum("ij,ij->i", a, b)
+    s = np.linalg.norm(v, axis=1)
+    k = np.where(s[:, None] > 1e-9, v / np.maximum(s, 1e-12)[:, None], 0.0)
+    flip = (s <= 1e-9) & (c < 0)
+    if flip.any():  # any axis perpendicular to a
+        ref = np.where((np.abs(a[flip, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        p = np.cross(a[flip], ref)
+        k[flip] = p / np.linalg.norm(p, axis=1, keepdims=True)
+    return _rodrigues(k, np.arctan2(s, c))
+
+
+def _rodrigues(k: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rotations (m, 3, 3) by ``angle`` (m,) about unit axes k (m, 3)."""
+    K = np.zeros((len(k), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
+    s, c = np.sin(angle)[:, None, None], np.cos(angle)[:, None, None]
+    return np.eye(3)[None] + s * K + (1 - c) * K @ K
+
+
+def tip_pairs(thumb: FingerWorkspace, finger: FingerWorkspace, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of fingertip-centre samples (thumb, finger), each (m, 3) in G, that close
+    towards each other, drawn from up to :data:`PAIR_SAMPLES` samples of each finger."""
+    it = rng.choice(len(thumb.samples), size=min(PAIR_SAMPLES, len(thumb.samples)), replace=False)
+    jf = rng.choice(len(finger.samples), size=min(PAIR_SAMPLES, len(finger.samples)), replace=False)
+    a, b = thumb.samples[it], finger.samples[jf]
+    u = b[None] - a[:, None]  # (nt, nf, 3) thumb -> finger
+    d = np.linalg.norm(u, axis=2)
+    u = u / np.maximum(d, 1e-12)[..., None]
+    ok = (np.einsum("ijk,ik->ij", u, thumb.sample_closing[it]) > CLOSING_COS) \
+        & (-np.einsum("ijk,jk->ij", u, finger.sample_closing[jf]) > CLOSING_COS) & (d > 1e-6)
+    i, j = np.nonzero(ok)
+    return a[i], b[j]
+
+
+def pinch_frames(thumb: FingerWorkspace, fingers: list[FingerWorkspace], radii: tuple[float, list[float]],
+                 p1: np.ndarray, n1: np.ndarray, p2: np.ndarray, n2: np.ndarray,
+                 rng: np.random.Generator, rolls: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Grasp frames X_OG (k, 4, 4), ``rolls`` per antipodal pair (p1, n1), (p2, n2) (each
+    (k, 3), frame O) that some tip pair can span within 3 mm: the thumb's tip centre on
+    ``p1 + r n1``, a finger's (the fingers taken in turn) on ``p2 + r n2``, up to the
+    mismatch of their distances, split evenly; the hand turned about the pair's axis by
+    evenly spaced angles from a random one.  ``radii`` = (thumb tip radius, finger tip
+    radii).  Also returns, per frame, the index of its pair and of its finger (in
+    ``fingers``): the contacts the search tries first (:func:`.single.grasp_for_frame`)."""
+    r_thumb, r_fingers = radii
+    pairs = [tip_pairs(thumb, f, rng) for f in fingers]
+    frames, which, finger = [], [], []
+    for j in range(len(p1)):
+        f = j % len(fingers)
+        a, b = pairs[f]
+        if not len(a):
+            continue
+        c1, c2 = p1[j] + r_thumb * n1[j], p2[j] + r_fingers[f] * n2[j]
+        span = np.linalg.norm(c2 - c1)
+        miss = np.abs(np.linalg.norm(b - a, axis=1) - span)
+        near = np.flatnonzero(miss < 0.003)
+        if not len(near):
+            continue
+        m = int(rng.choice(near))
+        u_G = (b[m] - a[m]) / np.linalg.norm(b[m] - a[m])
+        u_O = (c2 - c1) / span
+        roll = rng.uniform(0, 2 * np.pi) + np.arange(rolls) * 2 * np.pi / rolls
+        R = _rodrigues(np.repeat(u_O[None], rolls, 0), roll) @ _axis_rotation(u_G[None], u_O[None])[0]
+        X = np.tile(np.eye(4), (rolls, 1, 1))
+        X[:, :3, :3] = R
+        X[:, :3, 3] = (c1 + c2) / 2 - R @ ((a[m] + b[m]) / 2)
+        frames.append(X)
+        which.append(np.full(rolls, j))
+        finger.append(np.full(rolls, f))
+    if not frames:
+        return np.zeros((0, 4, 4)), np.zeros(0, np.intp), np.zeros(0, np.intp)
+    return np.concatenate(frames), np.concatenate(which), np.concatenate(finger)
