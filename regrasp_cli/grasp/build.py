@@ -28,7 +28,7 @@ from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.jaw import Jaw, antipodal_pairs, jaw_frames, jaw_geometry, jaw_grasp
 from regrasp_cli.grasp.pads import PadHand, pad_frames, pad_geometry, pad_grasp
 from regrasp_cli.grasp.pinch import pinch_frames
-from regrasp_cli.model.handshape import hand_hits_static, hand_shapes, static_geometry
+from regrasp_cli.model.handshape import HandShape, hand_hits_static, hand_shapes, static_geometry
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.single import ContactHint, Grasp, GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
@@ -179,28 +179,19 @@ def _tips_clear(problem: Problem, surface: Surface, r_tip: float, points: np.nda
     the pinches a hand can use there (:class:`_Usable`)."""
     import coal
 
-    from regrasp_cli.model.handshape import _tf
-
     p = surface.points if points is None else points
     n = surface.normals if normals is None else normals
     env = static_geometry(problem.spec.obstacles)
-    radius = r_tip - problem.spec.planning.contact_tolerance
-    sphere = coal.Sphere(radius)
+    sphere = coal.Sphere(r_tip - problem.spec.planning.contact_tolerance)
+    tip = HandShape((sphere,), np.eye(4)[None], np.zeros((1, 3)), np.array([sphere.radius]), (sphere,))
     task = problem.spec.task
     clear = np.zeros(len(p), dtype=bool)
+    X = np.eye(4)
     for X_WO in (task.X_WO_start, task.X_WO_goal):
         c_W = (p + r_tip * n) @ X_WO[:3, :3].T + X_WO[:3, 3]
-        near = np.linalg.norm(c_W[:, None] - env.centres[None], axis=2) <= radius + env.radii[None]
         for k in np.flatnonzero(~clear):
-            hit = False
-            for b in np.flatnonzero(near[k]):
-                req, res = coal.CollisionRequest(), coal.CollisionResult()
-                X = np.eye(4)
-                X[:3, 3] = c_W[k]
-                if coal.collide(sphere, _tf(X), env.geometries[b], _tf(env.X_W[b]), req, res) > 0:
-                    hit = True
-                    break
-            clear[k] = not hit
+            X[:3, 3] = c_W[k]
+            clear[k] = not hand_hits_static(tip, X, env)
     return np.flatnonzero(clear)
 
 
