@@ -46,3 +46,20 @@ def pose_to_dict(X: np.ndarray) -> dict:
     """``{xyz, quat: [x, y, z, w]}`` for YAML/JSON output."""
     return {"xyz": [float(v) for v in X[:3, 3]],
             "quat": [float(v) for v in Rotation.from_matrix(X[:3, :3]).as_quat()]}
+
+
+def rotation_aligning(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rotations turning unit vectors a onto b ((3,) -> (3, 3), or (k, 3) -> (k, 3, 3)):
+    the shortest arc, a half turn about an axis perpendicular to a when they are opposite."""
+    single = np.ndim(a) == 1
+    a, b = np.atleast_2d(a).astype(float), np.atleast_2d(b).astype(float)
+    v = np.cross(a, b)
+    s, c = np.linalg.norm(v, axis=1), np.einsum("ij,ij->i", a, b)
+    k = np.where(s[:, None] > 1e-9, v / np.maximum(s, 1e-12)[:, None], 0.0)
+    flip = (s <= 1e-9) & (c < 0)
+    if flip.any():  # any axis perpendicular to a
+        ref = np.where((np.abs(a[flip, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        p = np.cross(a[flip], ref)
+        k[flip] = p / np.linalg.norm(p, axis=1, keepdims=True)
+    R = Rotation.from_rotvec(k * np.arctan2(s, c)[:, None]).as_matrix()
+    return R[0] if single else R

@@ -37,7 +37,7 @@ PKG = "regrasp_cli"
 # alone; the most specific entry wins (so "manip.modes" is L0 inside L4's "manip.*")
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("", "errors", "spatial", "examples", "config", "store", "parallel", "manip.modes"),  # "": the package __init__
-    ("model.*", "grasp.*", "scene", "motion.*"),
+    ("model.*", "grasp.*", "placement.*", "scene", "motion.*"),
     ("roadmap.*",),
     ("trajectory", "replay", "artefacts"),
     ("manip.*", "validate"),

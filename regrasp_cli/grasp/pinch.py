@@ -22,23 +22,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from regrasp_cli.grasp.workspace import FingerWorkspace
+from regrasp_cli.spatial import rotation_aligning
 
 PAIR_SAMPLES = 400  # workspace samples per finger from which tip pairs are drawn
 CLOSING_COS = 0.3  # both fingertips close towards each other at least this squarely
-
-
-def _axis_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Rotations (k, 3, 3) turning unit vectors a (k, 3) onto b (k, 3) (the shortest arc;
-    a half turn about a perpendicular axis when they are opposite)."""
-    v = np.cross(a, b)
-    s, c = np.linalg.norm(v, axis=1), np.einsum("ij,ij->i", a, b)
-    k = np.where(s[:, None] > 1e-9, v / np.maximum(s, 1e-12)[:, None], 0.0)
-    flip = (s <= 1e-9) & (c < 0)
-    if flip.any():  # any axis perpendicular to a
-        ref = np.where((np.abs(a[flip, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-        p = np.cross(a[flip], ref)
-        k[flip] = p / np.linalg.norm(p, axis=1, keepdims=True)
-    return Rotation.from_rotvec(k * np.arctan2(s, c)[:, None]).as_matrix()
 
 
 def tip_pairs(thumb: FingerWorkspace, finger: FingerWorkspace, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -84,7 +71,7 @@ def pinch_frames(thumb: FingerWorkspace, fingers: list[FingerWorkspace], radii: 
         u_G = (b[m] - a[m]) / np.linalg.norm(b[m] - a[m])
         u_O = (c2 - c1) / span
         roll = rng.uniform(0, 2 * np.pi) + np.arange(rolls) * 2 * np.pi / rolls
-        R = Rotation.from_rotvec(roll[:, None] * u_O).as_matrix() @ _axis_rotation(u_G[None], u_O[None])[0]
+        R = Rotation.from_rotvec(roll[:, None] * u_O).as_matrix() @ rotation_aligning(u_G, u_O)
         X = np.tile(np.eye(4), (rolls, 1, 1))
         X[:, :3, :3] = R
         X[:, :3, 3] = (c1 + c2) / 2 - R @ ((a[m] + b[m]) / 2)

@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from regrasp_cli.grasp.pinch import _axis_rotation, pinch_frames, tip_pairs
+from regrasp_cli.grasp.pinch import pinch_frames, tip_pairs
 from regrasp_cli.grasp.workspace import FingerWorkspace
+from regrasp_cli.spatial import rotation_aligning
 
 ROOT = Path(__file__).resolve().parents[2]
 BAR = ROOT / "configs" / "bench" / "tune" / "bar_behind.yaml"
@@ -37,7 +38,8 @@ def test_axis_rotation_turns_a_onto_b(seed):
     b = rng.normal(size=(20, 3))
     b /= np.linalg.norm(b, axis=1, keepdims=True)
     b[0], b[1] = -a[0], a[1]  # opposite, equal
-    R = _axis_rotation(a, b)
+    R = rotation_aligning(a, b)
+    assert np.allclose(rotation_aligning(a[2], b[2]), R[2])
     assert np.allclose(np.einsum("kij,kj->ki", R, a), b, atol=1e-9)
     assert np.allclose(R @ np.transpose(R, (0, 2, 1)), np.eye(3), atol=1e-9)
     assert np.allclose(np.linalg.det(R), 1.0)
