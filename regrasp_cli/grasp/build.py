@@ -28,7 +28,7 @@ from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.jaw import Jaw, antipodal_pairs, jaw_frames, jaw_geometry, jaw_grasp
 from regrasp_cli.grasp.pads import PadHand, pad_frames, pad_geometry, pad_grasp
 from regrasp_cli.grasp.pinch import pinch_frames
-from regrasp_cli.model.handshape import HandShape, hand_hits_static, hand_shapes, static_geometry
+from regrasp_cli.model.handshape import hand_hits_static, hand_shapes, single_shape, static_geometry
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.single import ContactHint, Grasp, GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
@@ -182,8 +182,7 @@ def _tips_clear(problem: Problem, surface: Surface, r_tip: float, points: np.nda
     p = surface.points if points is None else points
     n = surface.normals if normals is None else normals
     env = static_geometry(problem.spec.obstacles)
-    sphere = coal.Sphere(r_tip - problem.spec.planning.contact_tolerance)
-    tip = HandShape((sphere,), np.eye(4)[None], np.zeros((1, 3)), np.array([sphere.radius]), (sphere,))
+    tip = single_shape(coal.Sphere(r_tip - problem.spec.planning.contact_tolerance))
     task = problem.spec.task
     clear = np.zeros(len(p), dtype=bool)
     X = np.eye(4)

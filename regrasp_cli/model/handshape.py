@@ -37,6 +37,14 @@ class HandShape:
     touch_geometries: tuple[coal.CollisionGeometry, ...]  # the fingertips eroded by the contact tolerance
 
 
+def single_shape(geometry: coal.CollisionGeometry) -> HandShape:
+    """One geometry at the origin of G as a shape (an object, a lone fingertip), for the
+    same checks as a hand's."""
+    geometry.computeLocalAABB()
+    return HandShape((geometry,), np.eye(4)[None], np.array([geometry.aabb_local.center()]),
+                     np.array([float(geometry.aabb_radius)]), (geometry,))
+
+
 def palm_and_finger_links(robot: Robot, hand: str) -> set[str]:
     """Names of the links of the palm and fingers of a hand."""
     h, model = robot.hands[hand], robot.model

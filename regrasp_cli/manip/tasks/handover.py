@@ -31,7 +31,7 @@ from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions, Scratch
 from regrasp_cli.manip.doublegrasp import DoubleGrasp, double_grasps, partners, single_configurations
 from regrasp_cli.manip.exchange import exchange_orientation, exchange_position, grid_nodes
-from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, \
+from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, single_shape, \
     palm_and_finger_links, static_geometry
 from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, approach_axis, exchange_configuration, shoulder, wrist
 from regrasp_cli.manip.modes import Kind, Mode, Transition
@@ -82,9 +82,7 @@ def picking_hand(problem: Problem, scratch: Scratch) -> str:
 def _object_shape(problem: Problem) -> HandShape:
     from regrasp_cli.model.collision import mesh_geometry
 
-    g = mesh_geometry(problem.object.mesh)
-    g.computeLocalAABB()
-    return HandShape((g,), np.eye(4)[None], np.array([g.aabb_local.center()]), np.array([float(g.aabb_radius)]), (g,))
+    return single_shape(mesh_geometry(problem.object.mesh))
 
 
 def exchange_pose(scratch: Scratch, dg: DoubleGrasp, lists: dict[str, GraspList], env: StaticGeometry,
