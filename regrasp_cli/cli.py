@@ -141,6 +141,38 @@ def grasps_show(ctx: click.Context, file: Path, best: int, scene: Path | None, p
 
 
 @main.group()
+def placements() -> None:
+    """Stable placements of the object and where they fit on the scene's supports (Harada et al. 2014)."""
+
+
+@placements.command("build")
+@click.argument("scene", type=click.Path(path_type=Path))
+@cache_option
+@click.pass_context
+def placements_build(ctx: click.Context, scene: Path) -> None:
+    """Compute the object's stable placements, store them in the cache (HDF5) and list
+    how many fit on each support of the scene."""
+    from regrasp_cli.commands.placements import run_placements_build
+
+    run_placements_build(scene, ctx.obj["cache_dir"])
+
+
+@placements.command("show")
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option("--scene", type=click.Path(path_type=Path), default=None,
+              help="Check the file against this scene's object (refuse it if stale) and count the fits on its "
+                   "supports.")
+@click.option("--png", type=click.Path(path_type=Path), default=None, metavar="FILE",
+              help="Also draw the placements into this PNG; needs --scene.")
+@cache_option
+def placements_show(file: Path, scene: Path | None, png: Path | None) -> None:
+    """Print the stored provenance and the placements of a placements file; draw them with --png."""
+    from regrasp_cli.commands.placements import show_placements
+
+    show_placements(file, scene, png)
+
+
+@main.group()
 def roadmap() -> None:
     """Offline roadmap: elementary Vis-PRM roadmaps composed into the Super Graph (§V-A)."""
 

@@ -462,12 +462,13 @@ class SceneSpec:
     obstacles: tuple[ObstacleSpec, ...]
     task: TaskSpec
     planning: PlanningOptions
+    supports: tuple[str, ...] | None = None  # obstacles whose tops may hold the object (None: any top)
 
 
 def load_scene_spec(path: str | Path) -> SceneSpec:
     file, data = read_yaml(path)
     f = Fields(file, data)
-    f.only("format", "robot", "object", "obstacles", "task", "planning")
+    f.only("format", "robot", "object", "obstacles", "task", "planning", "supports")
     if f.str("format") != SCENE_FORMAT:
         raise f.error("format", f"expected '{SCENE_FORMAT}', found {f.data['format']!r}")
     value = f.str("robot")
@@ -505,7 +506,24 @@ def load_scene_spec(path: str | Path) -> SceneSpec:
             contact_tolerance=p.float("contact_tolerance", planning.contact_tolerance, positive=True),
             ik_restarts=p.int("ik_restarts", planning.ik_restarts, minimum=1),
         )
-    return SceneSpec(file, robot, obj, obstacles, task, planning)
+    return SceneSpec(file, robot, obj, obstacles, task, planning, _supports(f, obstacles))
+
+
+def _supports(f: Fields, obstacles: tuple[ObstacleSpec, ...]) -> tuple[str, ...] | None:
+    """``supports``: names of box or cylinder obstacles whose tops may hold the object
+    (Harada et al. 2014 §III-C: placements on the environment's surfaces)."""
+    if not f.has("supports"):
+        return None
+    names = f.names("supports")
+    shapes = {ob.name: ob.shape for ob in obstacles}
+    for i, name in enumerate(names):
+        if name not in shapes:
+            raise InputError(f.file, f"supports[{i}]", f"no obstacle named {name!r} (obstacles: "
+                                                       f"{', '.join(shapes) or 'none'})")
+        if shapes[name] not in ("box", "cylinder"):
+            raise InputError(f.file, f"supports[{i}]", f"obstacle {name!r} is a {shapes[name]}: expected a box "
+                                                       "or a cylinder, whose flat top can hold the object")
+    return names
 
 
 def _obstacle(f: Fields) -> ObstacleSpec:

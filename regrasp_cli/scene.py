@@ -43,11 +43,12 @@ class Problem:
         return ObjectPlacement(self.object.mesh, X_WO)
 
 
-def load_problem(path: str | Path, cache_dir: Path | None, progress: PairProgress | None = None) -> Problem:
-    """The scene at ``path`` loaded, the robot's self-collision matrix read from
-    ``cache_dir`` or computed (reporting to ``progress(done, total)``, if given)."""
-    spec = load_scene_spec(path)
-    robot = load_robot(spec.robot)
+def scene_object(spec: SceneSpec) -> ObjectMesh:
+    """The scene's object mesh, scaled.
+
+    Raises:
+        InputError: it cannot be read, or it is flat (field ``object.mesh``).
+    """
     obj = load_object_mesh(spec.object.mesh, base_dir=spec.file.parent, scale=spec.object.scale,
                            file=str(spec.file), field="object.mesh")
     ext = obj.extents
@@ -58,6 +59,15 @@ def load_problem(path: str | Path, cache_dir: Path | None, progress: PairProgres
         raise InputError(spec.file, "object.mesh",
                          f"mesh {obj.name} has no thickness along {flat} (bounding box "
                          f"{' x '.join(f'{e:g}' for e in ext)} m), so it has no volume to grasp")
+    return obj
+
+
+def load_problem(path: str | Path, cache_dir: Path | None, progress: PairProgress | None = None) -> Problem:
+    """The scene at ``path`` loaded, the robot's self-collision matrix read from
+    ``cache_dir`` or computed (reporting to ``progress(done, total)``, if given)."""
+    spec = load_scene_spec(path)
+    robot = load_robot(spec.robot)
+    obj = scene_object(spec)
     for i, ob in enumerate(spec.obstacles):  # fail here, naming the scene file and field
         if ob.shape == "mesh":
             load_object_mesh(str(ob.mesh), base_dir=ob.mesh.parent, scale=ob.size[0],

@@ -228,7 +228,7 @@ def build_surface(mesh: trimesh.Trimesh, step: float, rng: np.random.Generator) 
 
     tree = cKDTree(points)
     curvature = _curvature(points, tree)
-    mass_centre = _mass_centre(m, watertight)
+    mass_centre = mass_centre_of(m, watertight)
 
     for a in (points, normals, curvature, face_index, mass_centre):
         a.setflags(write=False)
@@ -389,7 +389,7 @@ def _curvature(points: np.ndarray, tree: cKDTree) -> np.ndarray:
     return np.clip(sigma / scale, 0.0, 1.0)
 
 
-def _mass_centre(m: trimesh.Trimesh, watertight: bool) -> np.ndarray:
+def mass_centre_of(m: trimesh.Trimesh, watertight: bool) -> np.ndarray:
     """Volume centroid of a watertight mesh, else area-weighted surface centroid (warns)."""
     if watertight:
         return np.array(m.center_mass, dtype=float)

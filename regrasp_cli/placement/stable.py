@@ -44,6 +44,7 @@ class StablePlacement:
     margin: float  # m: distance from the mass centre's projection to the facet's nearest edge
     tipping_angle: float  # rad: atan(margin / height)
     area: float  # m^2: the facet's area
+    footprint: np.ndarray  # (k, 2) the facet's outline in S's xy plane, counter-clockwise
 
 
 def _facets(hull: trimesh.Trimesh) -> list[np.ndarray]:
@@ -87,5 +88,6 @@ def stable_placements(mesh: trimesh.Trimesh, mass_centre: np.ndarray,
         X = np.eye(4)
         X[:3, :3] = R
         X[:3, 3] = [-q2[0], -q2[1], d]
-        out.append(StablePlacement(X, n.copy(), h, float(inside), angle, float(poly.volume)))
+        outline = p2[poly.vertices] - q2  # scipy lists 2-D hull vertices counter-clockwise
+        out.append(StablePlacement(X, n.copy(), h, float(inside), angle, float(poly.volume), outline))
     return sorted(out, key=lambda p: -p.tipping_angle)

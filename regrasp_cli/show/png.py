@@ -217,3 +217,48 @@ def grasps_png(glist, object_mesh, best: int = 10, robot=None, size_per_grasp: i
         ax.set_title(f"#{i}  score {glist.scores[i, -1]:.3f}\n{fingers}", fontsize=9, y=0.98)
     return _png_bytes(fig)
 
+
+
+def placements_png(object_mesh, placements, counts: Sequence[int] | None = None, size_per_placement: int = 320,
+                   title: str = "") -> bytes:
+    """A grid picture of an object's stable placements, most stable first: the object
+    resting at X_SO on a grey support (z = 0 of S), its resting facet outlined (magenta)
+    and the mass centre's projection marked.
+
+    Args:
+        object_mesh: the object's ``trimesh.Trimesh`` in frame O (m).
+        placements: :class:`~regrasp_cli.placement.stable.StablePlacement` list.
+        counts: per placement, how many fits a scene has for it (printed), or None.
+        size_per_placement: pixels of one cell of the grid (square).
+    """
+    Figure, Poly3DCollection, Line3DCollection = _matplotlib()
+    n = len(placements)
+    cols = max(1, min(4, n))
+    rows = max(1, -(-n // cols))
+    obj = shapes_soup([mesh_shape("object", object_mesh, rgba=(0.85, 0.85, 0.85, 1.0))])
+    elev, azim = view_angles()
+    header = 0.6
+    fig = Figure(figsize=(cols * size_per_placement / DPI, rows * size_per_placement / DPI + header), dpi=DPI)
+    fig.suptitle(title or f"{n} stable placements", fontsize=13)
+    if n == 0:
+        fig.text(0.5, 0.5, "no stable placement", ha="center")
+    top = 1.0 - header / (rows * size_per_placement / DPI + header)
+    for i, p in enumerate(placements):
+        r, c = divmod(i, cols)
+        ax = fig.add_axes((c / cols, top - (r + 1) * top / rows, 1 / cols, top / rows * 0.92), projection="3d")
+        ax.computed_zorder = False
+        ax.set_axis_off()
+        resting = obj.moved(p.X_SO)
+        lo, hi = bounds(resting)
+        resting = resting.subdivided(0.15 * float((hi - lo).max()))  # small triangles sort right
+        _draw_soup(ax, Poly3DCollection, _floor(lo, hi, 0.0, margin=0.2 * float((hi - lo).max())), zorder=0,
+                   edges=False)
+        _draw_soup(ax, Poly3DCollection, resting, zorder=1)
+        ring = np.vstack([p.footprint, p.footprint[:1]])
+        ax.plot(ring[:, 0], ring[:, 1], np.zeros(len(ring)), color=CONTACT_COLOUR, linewidth=2.0, zorder=2)
+        ax.scatter([0.0], [0.0], [0.0], color=CONTACT_COLOUR, s=18, depthshade=False, zorder=3)
+        _cube(ax, lo, hi)
+        ax.view_init(elev=elev, azim=azim)
+        fits = "" if counts is None else f", {counts[i]} fits"
+        ax.set_title(f"#{i}  tips at {np.degrees(p.tipping_angle):.0f} deg{fits}", fontsize=9, y=0.98)
+    return _png_bytes(fig)
