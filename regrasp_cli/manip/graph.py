@@ -1,0 +1,176 @@
+"""The manipulation graph of Harada et al. 2014 (§IV, Fig. 5) and its search for the
+fewest regrasps (§IV-C-5, §V).
+
+A :class:`Node` is a configuration of CG_h∩CP: hand ``h`` holds the object with grasp
+``k`` while it rests at placement ``p`` (the initial placement ``start``, the target
+``goal``, or an intermediate one).  Edges, each one transition of the robot:
+
+* ``arrive``: from the robot's start configuration, a transit to a node at ``start`` (the
+  hand then closes);
+* ``transfer``: the same hand and grasp, the object carried from one placement to another
+  (a transfer path in CG_h);
+* ``regrasp``: at an intermediate placement, the hand opens, the robot moves (a transit
+  path in CP), a hand closes with another grasp: the Type-2 connection of two nodes of
+  one placement (§III-D; a Type-1 edge (g1, p1) -> (g2, p2) is a transfer to (g1, p2)
+  followed by this, so the graph holds only realizable Type-2 pieces);
+* ``handover``: hand ``a`` lifts the object from its placement, hands it to the other
+  hand in the air (CG_r∩CG_l, the exchange of Saut et al. 2010), which puts it down at
+  its placement;
+* ``leave``: from a node at ``goal``, the hand opens and the robot goes to its goal
+  configuration.
+
+A ``regrasp`` or ``handover`` edge changes the grasp: the search minimises their number
+first and the path length second (Dijkstra on the pair), over edges not yet found
+infeasible.  The graph is lazy: a task proposes the best path, solves its motions, and
+blocks the edges that fail, as Saut et al. 2010's lazy revalidation does for paths
+(§V-B); nothing here knows a robot.  :func:`fewest_regrasps` is a separate, plain
+fix-point count used to check the search in tests and benchmarks.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from dataclasses import dataclass
+from enum import Enum
+from typing import Callable, Iterable
+
+START, GOAL = "start", "goal"
+
+
+class EdgeKind(str, Enum):
+    ARRIVE = "arrive"
+    TRANSFER = "transfer"
+    REGRASP = "regrasp"
+    HANDOVER = "handover"
+    LEAVE = "leave"
+
+    @property
+    def regrasps(self) -> int:
+        return int(self in (EdgeKind.REGRASP, EdgeKind.HANDOVER))
+
+
+@dataclass(frozen=True, order=True)
+class Node:
+    hand: str
+    grasp: int
+    placement: str
+
+
+@dataclass(frozen=True)
+class Edge:
+    """``a`` None for ``arrive`` (from the robot's start), ``b`` None for ``leave``."""
+
+    kind: EdgeKind
+    a: Node | None
+    b: Node | None
+
+
+@dataclass(frozen=True)
+class Style:
+    """Which edges a manipulation may use (``--style``): ``one-arm`` picks and places with
+    one hand; ``handover`` adds hand-overs in the air; ``place-regrasp`` puts the object
+    down at intermediate placements and grasps it again; ``auto`` any of them."""
+
+    name: str
+    handover: bool
+    placements: bool  # intermediate placements (regrasp edges)
+
+
+STYLES = {s.name: s for s in (Style("auto", True, True), Style("one-arm", False, False),
+                               Style("handover", True, False), Style("place-regrasp", False, True))}
+
+
+def style_of(path: list[Edge]) -> str:
+    """The style a path uses: ``one-arm`` without regrasp, ``handover`` or
+    ``place-regrasp`` when only those change the grasp, ``handover+place-regrasp`` both."""
+    kinds = {e.kind for e in path}
+    used = [name for name, kind in (("handover", EdgeKind.HANDOVER), ("place-regrasp", EdgeKind.REGRASP))
+            if kind in kinds]
+    return "+".join(used) or "one-arm"
+
+
+def successors(nodes: Iterable[Node], style: Style, compatible: Callable[[Node, Node], bool]):
+    """``out(a)`` -> the edges leaving ``a`` (None: the robot's start) among ``nodes``
+    that ``style`` allows; ``compatible(a, b)`` says whether two hands' grasps can hold
+    the object together (for a hand-over)."""
+    nodes = sorted(set(nodes))
+    by_grasp: dict[tuple[str, int], list[Node]] = {}
+    by_place: dict[str, list[Node]] = {}
+    for n in nodes:
+        by_grasp.setdefault((n.hand, n.grasp), []).append(n)
+        by_place.setdefault(n.placement, []).append(n)
+
+    def out(a: Node | None) -> list[Edge]:
+        if a is None:
+            return [Edge(EdgeKind.ARRIVE, None, b) for b in by_place.get(START, [])]
+        edges = [Edge(EdgeKind.TRANSFER, a, b) for b in by_grasp[(a.hand, a.grasp)] if b.placement != a.placement
+                 and (style.placements or b.placement == GOAL)]
+        if style.placements and a.placement not in (START, GOAL):
+            edges += [Edge(EdgeKind.REGRASP, a, b) for b in by_place[a.placement] if b != a]
+        if style.handover:
+            edges += [Edge(EdgeKind.HANDOVER, a, b) for b in nodes if b.hand != a.hand and
+                      b.placement != a.placement and (style.placements or b.placement == GOAL) and compatible(a, b)]
+        if a.placement == GOAL:
+            edges.append(Edge(EdgeKind.LEAVE, a, None))
+        return edges
+    return out
+
+
+def search(out, length: Callable[[Edge], float], blocked: set[Edge] = frozenset()) -> list[Edge] | None:
+    """The path from the robot's start to its goal of fewest regrasps, then shortest
+    (``length`` of each edge >= 0), avoiding ``blocked`` edges; None when there is none."""
+    tie = itertools.count()
+    best = {None: (0, 0.0)}
+    back: dict = {}
+    heap = [(0, 0.0, next(tie), None)]
+    done = set()
+    while heap:
+        r, d, _, a = heapq.heappop(heap)
+        if a in done:
+            continue
+        done.add(a)
+        if a == GOAL:
+            path, n = [], GOAL
+            while n is not None:
+                e = back[n]
+                path.append(e)
+                n = e.a
+            return path[::-1]
+        for e in out(a):
+            if e in blocked:
+                continue
+            b = GOAL if e.b is None else e.b
+            cost = (r + e.kind.regrasps, d + length(e))
+            if b not in done and cost < best.get(b, (float("inf"), 0.0)):
+                best[b], back[b] = cost, e
+                heapq.heappush(heap, (*cost, next(tie), b))
+    return None
+
+
+def fewest_regrasps(nodes: Iterable[Node], out, feasible: Callable[[Edge], bool], limit: int = 10) -> int | None:
+    """The least number of regrasps of any path from the robot's start to its goal over
+    the ``feasible`` edges, by a plain fix point (the nodes reached with r regrasps,
+    closed under the edges that change no grasp, then one more regrasp); None when no path
+    has ``limit`` or fewer.  Independent of :func:`search`, to check it."""
+    def close(reached: set) -> set:
+        todo = list(reached)
+        while todo:
+            for e in out(todo.pop()):
+                if e.kind.regrasps == 0 and feasible(e):
+                    b = GOAL if e.b is None else e.b
+                    if b not in reached:
+                        reached.add(b)
+                        if b != GOAL:
+                            todo.append(b)
+        return reached
+
+    reached = close({None})
+    for r in range(limit + 1):
+        if GOAL in reached:
+            return r
+        more = {e.b for a in reached if a != GOAL for e in out(a) if e.kind.regrasps and feasible(e)}
+        if more <= reached:
+            return None
+        reached = close(reached | more)
+    return None
