@@ -183,3 +183,29 @@ def _cached(path: Path, prov, build: bool, make, read, builder: Builder):
         return read(path, prov), sha256_file(path)
 
 
+
+
+# ------------------------------------------------------------------ placements
+
+
+def load_placements(cache_dir: Path, problem: Problem, build: bool, builder: Builder | None = None):
+    """The object's stable placements (:mod:`placement.artefact`) and the file's SHA-256,
+    computed when missing or stale unless ``build`` is False (then refused).
+
+    Raises:
+        InputError: the object has no stable placement (field ``object.mesh`` of the scene).
+    """
+    from regrasp_cli.placement import artefact as pa
+    from regrasp_cli.placement.stable import PlacementOptions
+
+    options = PlacementOptions()
+    obj = problem.object
+
+    def make() -> None:
+        try:
+            pa.build_placements(cache_dir, obj, options)
+        except InputError as exc:
+            raise InputError(problem.spec.file, exc.field, exc.message) from None
+
+    return _cached(pa.artefact_path(cache_dir, obj, options), pa.provenance(obj, options), build, make,
+                   pa.read_placements, builder or QuietBuilder())

@@ -225,17 +225,23 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
               help="Nodes per elementary roadmap of the roadmap to use (built if missing).")
 @click.option("--grasp-target", type=int, default=None,
               help="Target size of the grasp lists to use (built if missing; default 120).")
+@click.option("--style", type=click.Choice(["auto", "one-arm", "handover", "place-regrasp", "seed000"]),
+              default="auto", show_default=True,
+              help="auto: the manipulation with the fewest regrasps (one arm, hand-overs, intermediate placements); "
+                   "or only one arm, only hand-overs, only intermediate placements; seed000: the fixed hand-over "
+                   "task of Saut et al. 2010.")
 @cache_option
 @click.pass_context
 def plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, planner: str, no_build: bool, jobs: int,
-         no_timings: bool, no_check: bool, roadmap_nodes: int, grasp_target: int | None) -> None:
-    """Plan the pick, hand-over and place of the scene's object; write the plan JSON.
+         no_timings: bool, no_check: bool, roadmap_nodes: int, grasp_target: int | None, style: str) -> None:
+    """Plan how the robot moves the scene's object from its start to its goal pose with
+    the fewest regrasps; write the plan JSON.
 
     Exits 0 when solved, 1 with the failing stage and reason when not."""
     from regrasp_cli.commands.plan import run_plan
 
     run_plan(scene, ctx.obj["cache_dir"], output, seed, planner, not no_build, jobs, not no_timings, not no_check,
-             roadmap_nodes, grasp_target)
+             roadmap_nodes, grasp_target, style=style)
 
 
 @main.command()

@@ -14,7 +14,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from regrasp_cli.artefacts import load_artefacts
+from regrasp_cli.artefacts import load_artefacts, load_placements
 from regrasp_cli.commands.report import CliBuilder
 from regrasp_cli.errors import EmptyGraspList, EmptyRoadmap
 from regrasp_cli.manip.context import OnlineOptions
@@ -23,7 +23,8 @@ from regrasp_cli.manip.queries import Roadmap
 from regrasp_cli.manip.record import make_plan
 from regrasp_cli.manip.solve import Outcome
 from regrasp_cli.manip.status import PlanningFailed, Stage
-from regrasp_cli.manip.tasks import handover
+from regrasp_cli.manip.tasks import handover, manipulation
+from regrasp_cli.manip.tasks.manipulation import GraphOptions
 from regrasp_cli.roadmap.build import RoadmapOptions
 from regrasp_cli.commands.progress import load_problem_shown
 from regrasp_cli.store import check_writable
@@ -49,11 +50,19 @@ def print_summary(plan: Plan, outcome: Outcome, console: Console) -> None:
     console.print(f"{stages}: total {outcome.planning_s:.2f} s; motion of {plan.duration:.1f} s in "
                   f"{sum(len(p.waypoints) for p in plan.phases)} waypoints over {len(plan.phases)} phases "
                   f"({kinds})")
+    styles = outcome.counts.get("styles")
+    if styles:
+        r, n = outcome.counts.get("regrasps", 0), outcome.counts.get("placements", 0)
+        console.print(f"style: {outcome.counts['style']}, {r} regrasp{'s' * (r != 1)}, {n} intermediate "
+                      f"placement{'s' * (n != 1)}")
+        for name, why in styles.items():
+            if why != "chosen":
+                console.print(f"  {name} not used: {why}")
 
 
 def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, planner: str, build: bool, jobs: int,
              timings: bool, check: bool, roadmap_nodes: int = RoadmapOptions.nodes, grasp_target: int | None = None,
-             console: Console | None = None) -> int:
+             console: Console | None = None, style: str = "auto") -> int:
     """The `plan` command; returns the exit code (0 solved, 1 not)."""
     from regrasp_cli.commands.validate import print_validation
     from regrasp_cli.validate import validate_plan
@@ -75,8 +84,14 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
             failure = PlanningFailed(Stage.GRASPS if isinstance(exc, EmptyGraspList) else Stage.ROADMAP, exc.message)
     if failure is not None:
         outcome = handover.failed(problem, failure)
-    else:
+    elif style == "seed000":
         outcome = handover.plan(problem, lists, Roadmap.of(art) if art is not None else None, options, seed)
+    else:
+        stable = []
+        if style in ("auto", "place-regrasp"):
+            stable, hashes["placements"] = load_placements(cache_dir, problem, build, CliBuilder(console))
+        outcome = manipulation.plan(problem, lists, Roadmap.of(art) if art is not None else None, options, seed,
+                                    stable, GraphOptions(style=style))
     plan = make_plan(problem, lists, outcome, options, seed, out_file, cache_dir, hashes, timings)
     write_plan(out_file, plan)
     if outcome.failure is not None:

@@ -74,10 +74,15 @@ def cheap_order(scratch: Scratch, grasps: GraspList, ks: np.ndarray, X_WO: np.nd
 
 
 def single_configurations(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarray,
-                          env: StaticGeometry, only: np.ndarray | None = None) -> tuple[list[SingleConfig], SingleStats]:
-    """Up to ``single_per_hand`` single-grasp configurations at X_WO, from the grasps
-    (all, or the indices ``only``) that clear the obstacles, best cheap score first."""
+                          env: StaticGeometry, only: np.ndarray | None = None, wanted: int | None = None,
+                          attempts: int | None = None, lean: bool = True) -> tuple[list[SingleConfig], SingleStats]:
+    """Up to ``wanted`` (default ``single_per_hand``) single-grasp configurations at X_WO,
+    from the first ``attempts`` (default ``grasp_attempts``) of the grasps (all, or the
+    indices ``only``) that clear the obstacles, best cheap score first; without ``lean``
+    the arm alone reaches."""
     o = scratch.options
+    wanted = o.single_per_hand if wanted is None else wanted
+    attempts = o.grasp_attempts if attempts is None else attempts
     free = environment_free(grasps, shapes, X_WO, env)
     if only is not None:
         free = free[np.isin(free, only)]
@@ -85,14 +90,14 @@ def single_configurations(scratch: Scratch, rng: np.random.Generator, grasps: Gr
     found, tried = [], 0
     # the arm alone first, as the paper; only when that leaves too few, the torso helps
     # with the grasps it could not reach (its postures are farther from the roadmap's)
-    for lean in (False, True):
-        for k in ks[:o.grasp_attempts]:
-            if len(found) >= o.single_per_hand:
+    for leaning in (False, True)[:1 + lean]:
+        for k in ks[:attempts]:
+            if len(found) >= wanted:
                 break
             if any(c.grasp == k for c in found):
                 continue
-            tried += not lean
-            c = single_configuration(scratch, rng, grasps, int(k), X_WO, lean)
+            tried += not leaning
+            c = single_configuration(scratch, rng, grasps, int(k), X_WO, leaning)
             if c is not None:
                 found.append(c)
     return found, SingleStats(len(grasps), len(ks), tried, len(found))

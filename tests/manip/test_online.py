@@ -40,7 +40,7 @@ from regrasp_cli.manip.queries import QueryStats, Roadmap, roadmap_query
 from regrasp_cli.manip.solve import TransitionStats
 from regrasp_cli.manip.status import Stage
 from regrasp_cli.manip.tasks import handover
-from regrasp_cli.manip.tasks.handover import TRANSITIONS, _object_shape, exchange_pose, grasp_id, phase_worlds, plan
+from regrasp_cli.manip.tasks.handover import TRANSITIONS, object_shape, exchange_pose, grasp_id, phase_worlds, plan
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.motion.local import distance, joint_reach, joint_weights
 from regrasp_cli.motion.rrt import RRTOptions
@@ -374,7 +374,7 @@ def test_exchange_samples_turn_about_the_vertical_through_the_object_centre(prob
     """Without the Gaussian spread, a sample is the pose turned by ``yaw`` about the
     vertical through the object's centre: the centre stays, the orientation is Rz(yaw) R."""
     scratch = new_scratch(problem, exchange_sigma=0.0, exchange_angle_sigma=0.0)
-    obj = _object_shape(problem)
+    obj = object_shape(problem)
     X = np.eye(4)
     X[:3, :3] = Rotation.from_rotvec([0.3, -0.2, 1.0]).as_matrix()
     X[:3, 3] = [0.5, 0.1, 1.0]
@@ -387,7 +387,7 @@ def test_exchange_samples_turn_about_the_vertical_through_the_object_centre(prob
 def test_exchange_pose_puts_the_object_centre_on_a_free_grid_node(problem, lists, env, best_double):
     scratch = new_scratch(problem)
     robot, task = problem.robot, problem.spec.task
-    obj = _object_shape(problem)
+    obj = object_shape(problem)
     X, tested = exchange_pose(scratch, best_double, lists, env, obj)
     assert X is not None and tested >= 1
     assert np.allclose(X[:3, :3].T @ X[:3, :3], np.eye(3), atol=1e-9) and np.linalg.det(X[:3, :3]) > 0

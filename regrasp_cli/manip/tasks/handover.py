@@ -79,7 +79,7 @@ def picking_hand(problem: Problem, scratch: Scratch) -> str:
     return min(d, key=d.get)
 
 
-def _object_shape(problem: Problem) -> HandShape:
+def object_shape(problem: Problem) -> HandShape:
     from regrasp_cli.model.collision import mesh_geometry
 
     return single_shape(mesh_geometry(problem.object.mesh))
@@ -242,7 +242,7 @@ def _exchanges(scratch: Scratch, rng: np.random.Generator, doubles: list[DoubleG
     samples turned about the vertical with the torso solved with both arms (a generator:
     the next is searched only when a query of the previous one failed)."""
     o = scratch.options
-    env, obj = static_geometry(scratch.problem.spec.obstacles), _object_shape(scratch.problem)
+    env, obj = static_geometry(scratch.problem.spec.obstacles), object_shape(scratch.problem)
     centres = {}  # the pose of Fig. 6 of each double grasp, found once
     for lean in (False, True):  # every double grasp with the arms alone first, as the paper
         for tried, dg in enumerate(doubles[:o.double_grasps_tried], 1):
@@ -250,13 +250,13 @@ def _exchanges(scratch: Scratch, rng: np.random.Generator, doubles: list[DoubleG
                 centres[tried] = exchange_pose(scratch, dg, lists, env, obj)[0]
             if centres[tried] is None:
                 continue
-            ex = _exchange_near(scratch, rng, dg, lists, centres[tried], obj, env, lean)
+            ex = exchange_near(scratch, rng, dg, lists, centres[tried], obj, env, lean)
             if ex is not None:
                 yield dg, ex, tried
     yield None, None, min(len(doubles), o.double_grasps_tried)
 
 
-def _exchange_near(scratch: Scratch, rng: np.random.Generator, dg: DoubleGrasp, lists: dict[str, GraspList],
+def exchange_near(scratch: Scratch, rng: np.random.Generator, dg: DoubleGrasp, lists: dict[str, GraspList],
                    X_c: np.ndarray, obj: HandShape, env: StaticGeometry, lean: bool) -> ExchangeConfig | None:
     """The exchange configuration of the first of ``exchange_samples`` object poses around
     X_c (4, 4) that both arms reach: X_c itself and Gaussian samples; with ``lean``,
@@ -312,7 +312,7 @@ def _keys_and_paths(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarr
     t0 = time.perf_counter()
     for attempt in range(o.key_attempts):
         dg, ex, tried = next(candidates)
-        t0 = _tick(clock, "exchange", t0)
+        t0 = tick(clock, "exchange", t0)
         counts["double_grasps_tried"] = tried
         if dg is None:
             if attempt == 0:
@@ -325,7 +325,7 @@ def _keys_and_paths(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarr
         # the first attempt's streams, then one per attempt
         streams = [[seed, TRANSITIONS.index(q.label)] + ([attempt] if attempt else []) for q in queries]
         results = solve_queries(scratch, roadmap, weights, queries, streams, o.jobs)
-        t0 = _tick(clock, "queries", t0)
+        t0 = tick(clock, "queries", t0)
         for name in TRANSITIONS:
             table[name] = table[name].plus(results[name].stats)
             counts["query_checks"] += results[name].checks
@@ -338,7 +338,7 @@ def _keys_and_paths(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarr
                                  "grasps with their exchange tried)", failed), table, counts)
 
 
-def _blend_check(scratch: Scratch, queries: list[Query]):
+def blend_check(scratch: Scratch, queries: list[Query]):
     """curve_free(step, label, A, C, B) of :func:`solve.time_steps`: a corner on a query's
     path in its certified world; another corner (on or beside an approach, lift or retreat
     line) in the step's world without clearance, as those lines were checked; a step
@@ -362,7 +362,7 @@ class _Failed(Exception):
         self.failure, self.table, self.counts = failure, table, counts
 
 
-def _tick(clock: dict, stage: str, t0: float) -> float:
+def tick(clock: dict, stage: str, t0: float) -> float:
     t = time.perf_counter()
     clock[stage] = clock.get(stage, 0.0) + t - t0
     return t
@@ -416,19 +416,19 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         try:
             g, doubles, c = choose_hands(scratch, lists, seed)
             counts.update(c)
-            t0 = _tick(clock, "double grasps", t0)
+            t0 = tick(clock, "double grasps", t0)
             dg, ex, steps, queries, paths, table, c = _keys_and_paths(scratch, roadmap, weights, seed, lists, g, doubles, clock)
         except _Failed as exc:  # the failure with the counts of its stage
             if exc.failure.stage == Stage.GRASPS:
-                _tick(clock, "double grasps", t0)
+                tick(clock, "double grasps", t0)
             counts.update(exc.counts)
             table = exc.table
             raise exc.failure from None
         counts.update(c)
         t0 = time.perf_counter()
         phases = time_steps(steps, paths, problem.robot.velocity, np.full(problem.robot.nq, options.acceleration),
-                            _blend_check(scratch, queries) if options.blend else None)
-        _tick(clock, "timing", t0)
+                            blend_check(scratch, queries) if options.blend else None)
+        tick(clock, "timing", t0)
     except PlanningFailed as exc:
         counts["checks"] = _checks(scratch, counts)
         return Outcome(TASK, placements=placements, stages=clock, transitions=table, counts=counts, failure=exc)

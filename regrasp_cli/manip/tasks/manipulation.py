@@ -1,0 +1,419 @@
+"""Pick and place with the fewest regrasps: the manipulation planner of Harada et al. 2014
+(seed 001) over the manipulation graph of :mod:`manip.graph`.  It chooses between one-arm
+pick-and-place, a hand-over in the air (Saut et al. 2010) and putting the object down at
+intermediate placements to grasp it again (§IV, Fig. 5), or as many of those as needed.
+
+Stages, each timed:
+
+1. ``nodes`` (§IV-B): for each hand and placement (the initial and target ones, then the
+   intermediate ones), single-grasp configurations (IK and collision, with their approach
+   and lift lines: :func:`doublegrasp.single_configurations`), the grasps already reached
+   elsewhere tried first so that transfers can join them.  A hand whose shoulder is
+   farther than its reach from a placement has no node there.  Intermediate placements
+   (:mod:`placement.supports`: stable placements fitted on the scene's supports, one per
+   resting face nearest the middle of the start and goal) are added only once every path
+   without a regrasp has failed: they cannot give fewer regrasps.
+2. ``search`` and ``motions`` (§IV-C), in turn: the path of fewest regrasps and then least
+   joint-space length among the edges not found infeasible; its edges' motions are solved
+   (transit and transfer queries by the planner's path solver, straight first; a
+   hand-over edge first needs an exchange configuration, :func:`handover.exchange_near`);
+   an edge that fails is blocked and the search runs again, ``graph_attempts`` times at
+   most.  The first path whose motions all succeed is the plan: as every path with fewer
+   regrasps failed before it, its regrasp count is the least the graph's motions allow.
+3. ``timing``, as the hand-over's.
+
+Type-1 edges (§III-D) are not in the graph: each is the Type-2 pair transfer + regrasp it
+expands to, so the search returns realizable paths directly.  Path optimisation (§V)
+merges consecutive transfers, which a search that minimises regrasps never returns.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from regrasp_cli.grasp.build import GraspList
+from regrasp_cli.manip.context import OnlineOptions, Scratch
+from regrasp_cli.manip.doublegrasp import DoubleGrasp, single_configurations
+from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, search, style_of, successors
+from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, SingleConfig, shoulder
+from regrasp_cli.manip.modes import Kind, Mode, Transition
+from regrasp_cli.manip.queries import Roadmap
+from regrasp_cli.manip.solve import Outcome, Query, Step, TransitionStats, check_ends, solve_queries, time_steps
+from regrasp_cli.manip.status import PlanningFailed, Stage
+from regrasp_cli.manip.tasks import handover
+from regrasp_cli.manip.tasks.handover import blend_check, exchange_near, exchange_pose, grasp_id, object_shape, \
+    phase_worlds, tick
+from regrasp_cli.model.handshape import hand_shapes, hands_collide, static_geometry
+from regrasp_cli.motion.local import joint_reach, joint_weights
+from regrasp_cli.placement.stable import StablePlacement
+from regrasp_cli.placement.supports import FitOptions, fit_placements, scene_supports
+from regrasp_cli.scene import Problem
+from regrasp_cli.spatial import inverse
+
+TASK = "manipulation graph"
+STAGES = ("nodes", "search", "motions", "timing")
+HANDS = ("right", "left")
+
+
+@dataclass(frozen=True)
+class GraphOptions:
+    style: str = "auto"  # a key of manip.graph.STYLES
+    intermediate: int = 6  # intermediate placements at most (one per resting face)
+    graph_attempts: int = 12  # paths whose motions are tried before giving up
+    reach_factor: float = 1.0  # a hand has no node where the object is farther than this x its arm's reach
+    intermediate_nodes: int = 4  # configurations per hand at an intermediate placement ...
+    intermediate_attempts: int = 12  # ... from this many grasps at most, the arm alone (IK that fails is slow)
+    fit: FitOptions = field(default_factory=FitOptions)
+
+
+class _Graph:
+    """The nodes found so far (their configurations), the edges' motions solved so far,
+    and the blocked edges, for one planning run."""
+
+    def __init__(self, scratch: Scratch, lists: dict[str, GraspList], roadmap: Roadmap | None,
+                 placements: dict[str, np.ndarray], options: GraphOptions, seed: int):
+        p = scratch.problem
+        self.scratch, self.lists, self.placements, self.options, self.seed = scratch, lists, placements, options, seed
+        self.roadmap = roadmap
+        self.query_weights = roadmap.weights if roadmap is not None else joint_weights(p.robot)
+        self.env = static_geometry(p.spec.obstacles)
+        self.shapes = {h: hand_shapes(p.robot, h, lists[h].finger_q, p.spec.planning.contact_tolerance) for h in HANDS}
+        self.configs: dict[Node, SingleConfig] = {}
+        self.blocked: set[Edge] = set()
+        self.why: dict[Edge, str] = {}
+        self.exchanges: dict[Edge, ExchangeConfig] = {}
+        self.paths: dict[str, np.ndarray] = {}
+        self.table: dict[str, TransitionStats] = {}
+        self.counts = {"single_checks": 0, "query_checks": 0, "paths_tried": 0, "queries": 0, "exchanges_tried": 0}
+        reach = joint_reach(p.robot)
+        self.reach = {h: options.reach_factor * reach[p.robot.hands[h].arm_idx[0]] for h in HANDS}
+        self.shoulder = {h: shoulder(scratch, h, p.robot.q_rest) for h in HANDS}
+        self.weights = joint_weights(p.robot)
+
+    # ---------------------------------------------------------------- nodes
+
+    def add_nodes(self, pids: list[str], intermediate: bool = False) -> None:
+        """Single-grasp configurations of each hand at each placement of ``pids`` (fewer,
+        from fewer grasps and without the torso's help, at ``intermediate`` ones)."""
+        o = self.options
+        limits = dict(wanted=o.intermediate_nodes, attempts=o.intermediate_attempts, lean=False) if intermediate \
+            else {}
+        for pid in pids:
+            X = self.placements[pid]
+            for hand in HANDS:
+                if np.linalg.norm(X[:3, 3] - self.shoulder[hand]) > self.reach[hand]:
+                    continue
+                known = np.array(sorted({n.grasp for n in self.configs if n.hand == hand}), dtype=int)
+                rng = np.random.default_rng([self.seed, 30, HANDS.index(hand), list(self.placements).index(pid)])
+                before = self.scratch.checks
+                found = []
+                if len(known):  # grasps reached elsewhere first: a transfer can join them
+                    found, _ = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand], X,
+                                                     self.env, known, **limits)
+                more, _ = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand], X, self.env,
+                                                np.setdiff1d(np.arange(len(self.lists[hand])),
+                                                             [c.grasp for c in found]), **limits)
+                self.counts["single_checks"] += self.scratch.checks - before
+                for c in found + more:
+                    self.configs[Node(hand, c.grasp, pid)] = c
+
+    def compatible(self, a: Node, b: Node) -> bool:
+        """Can the two hands hold the object together with these grasps (hand shapes only)?"""
+        la, lb = self.lists[a.hand], self.lists[b.hand]
+        return not hands_collide(self.shapes[a.hand][a.grasp], la.X_OG[a.grasp], self.shapes[b.hand][b.grasp],
+                                 lb.X_OG[b.grasp])
+
+    def length(self, e: Edge) -> float:
+        """Weighted joint distance the edge's motion covers at least (its queries' ends)."""
+        q = self.scratch.problem
+        a = q.q_start if e.a is None else self.configs[e.a].lift[-1]
+        b = q.q_goal if e.b is None else self.configs[e.b].lift[-1]
+        return float(np.linalg.norm((a - b) * self.weights))
+
+    # ---------------------------------------------------------------- motions of edges
+
+    def _queries(self, e: Edge, label: str) -> list[Query]:
+        p, robot = self.scratch.problem, self.scratch.problem.robot
+        open_ = {h: robot.hands[h].open for h in HANDS}
+        ca = self.configs.get(e.a) if e.a is not None else None
+        cb = self.configs.get(e.b) if e.b is not None else None
+        if e.kind == EdgeKind.ARRIVE:
+            return [Query(label, p.q_start, cb.approach[0], phase_worlds(self.scratch, self.placements[START], None,
+                                                                         open_))]
+        if e.kind == EdgeKind.LEAVE:
+            return [Query(label, ca.approach[0], p.q_goal, phase_worlds(self.scratch, self.placements[GOAL], None,
+                                                                        open_))]
+        if e.kind == EdgeKind.REGRASP:
+            return [Query(label, ca.approach[0], cb.approach[0],
+                          phase_worlds(self.scratch, self.placements[e.a.placement], None, open_))]
+        if e.kind == EdgeKind.TRANSFER:
+            return [Query(label, ca.lift[-1], cb.lift[-1], self._held(e.a))]
+        ex = self.exchanges[e]
+        return [Query(label + ":carry", ca.lift[-1], ex.approach[0], self._held(e.a)),
+                Query(label + ":place", ex.retreat[-1], cb.lift[-1], self._held(e.b))]
+
+    def _held(self, n: Node):
+        robot = self.scratch.problem.robot
+        fingers = {h: robot.hands[h].open for h in HANDS}
+        fingers[n.hand] = self.lists[n.hand].finger_q[n.grasp]
+        return phase_worlds(self.scratch, inverse(self.lists[n.hand].X_OG[n.grasp]), n.hand, fingers)
+
+    def _exchange(self, e: Edge) -> bool:
+        """The exchange configuration of a hand-over edge (found once); False when none."""
+        if e in self.exchanges:
+            return True
+        a, b = self.configs[e.a], self.configs[e.b]
+        dg = DoubleGrasp(a, b, 0.0, 0.0, 0.0)
+        obj = object_shape(self.scratch.problem)
+        rng = np.random.default_rng([self.seed, 40, len(self.why), self.counts["exchanges_tried"]])
+        self.counts["exchanges_tried"] += 1
+        X_c = exchange_pose(self.scratch, dg, self.lists, self.env, obj)[0]
+        for lean in (False, True):
+            ex = None if X_c is None else exchange_near(self.scratch, rng, dg, self.lists, X_c, obj, self.env, lean)
+            if ex is not None:
+                self.exchanges[e] = ex
+                return True
+        return False
+
+    def solve(self, path: list[Edge], labels: list[str]) -> Edge | None:
+        """Solve the motions of the path's edges not solved yet; the first edge that
+        fails (then blocked, with why), or None when all have motions."""
+        for e, label in zip(path, labels):
+            if e.kind == EdgeKind.HANDOVER and not self._exchange(e):
+                self.why[e] = "no reachable collision-free exchange pose for the hand-over"
+                self.blocked.add(e)
+                return e
+        queries = [q for e, label in zip(path, labels) for q in self._queries(e, label) if q.label not in self.paths]
+        streams = [[self.seed, 50, self.counts["queries"] + i] for i in range(len(queries))]
+        self.counts["queries"] += len(queries)
+        results = solve_queries(self.scratch, self.roadmap, self.query_weights, queries, streams,
+                                self.scratch.options.jobs)
+        failed = None
+        for q in queries:
+            r = results[q.label]
+            self.table[q.label] = self.table.get(q.label, TransitionStats()).plus(r.stats)
+            self.counts["query_checks"] += r.checks
+            if r.error is None:
+                self.paths[q.label] = r.path
+        for e, label in zip(path, labels):
+            bad = [q for q in self._queries(e, label) if q.label not in self.paths]
+            if bad and failed is None:
+                failed = e
+            if bad:
+                self.blocked.add(e)
+                self.why[e] = results[bad[0].label].error
+        return failed
+
+
+def _label(e: Edge) -> str:
+    """A query label unique to the edge (its ends' hands, grasps and placements)."""
+    def n(x: Node | None) -> str:
+        return "robot" if x is None else f"{x.hand}-{x.grasp}@{x.placement}"
+    return f"{e.kind.value} {n(e.a)} -> {n(e.b)}"
+
+
+def intermediate_placements(problem: Problem, stable: list[StablePlacement], options: GraphOptions,
+                            shoulders: dict[str, np.ndarray], reach: dict[str, float]) -> dict[str, np.ndarray]:
+    """``p1``, ``p2``...: per resting face (most stable first), the fit on the scene's
+    supports that both arms reach most easily (the least of its distances to the two
+    shoulders; else the nearest to one), ``intermediate`` at most."""
+    spec = problem.spec
+    fitted = fit_placements(stable, scene_supports(spec.obstacles, spec.supports, spec.file), problem.object.mesh,
+                            spec.obstacles, options.fit)
+    if not len(fitted):
+        return {}
+    p = fitted.X_WO[:, :3, 3]
+    d = np.stack([np.linalg.norm(p - shoulders[h], axis=1) / reach[h] for h in HANDS])  # (2, n), 1: at the reach
+    out = {}
+    for face in range(len(stable)):
+        ok = np.flatnonzero((fitted.stable == face) & (d.min(axis=0) <= 1.0))
+        if not len(ok):
+            continue
+        both = ok[d[:, ok].max(axis=0) <= 1.0]
+        best = both[np.argmin(d[:, both].max(axis=0))] if len(both) else ok[np.argmin(d[:, ok].min(axis=0))]
+        out[f"p{len(out) + 1}"] = fitted.X_WO[best]
+        if len(out) == options.intermediate:
+            break
+    return out
+
+
+def steps_of(g: _Graph, path: list[Edge], labels: list[str]) -> list[Step]:
+    """The path's transitions with their fixed pieces (approach, lift, exchange lines) and
+    query labels, in order."""
+    steps = []
+
+    def held(n: Node) -> Mode:
+        return Mode.held(**{n.hand: grasp_id(n.hand, n.grasp)})
+
+    def release(n: Node) -> None:
+        c = g.configs[n]
+        steps.append(Step(Transition(Kind.RELEASE, held(n), Mode.resting(n.placement), f"open_{n.hand}", (n.hand,)),
+                          (c.q_closed[None], c.approach[-1:])))
+
+    def grasp(n: Node) -> None:
+        c = g.configs[n]
+        steps.append(Step(Transition(Kind.GRASP, Mode.resting(n.placement), held(n), f"close_{n.hand}", (n.hand,)),
+                          (c.approach[-1:], c.q_closed[None])))
+
+    for e, label in zip(path, labels):
+        ca = g.configs.get(e.a) if e.a is not None else None
+        cb = g.configs.get(e.b) if e.b is not None else None
+        if e.kind == EdgeKind.ARRIVE:
+            rest = Mode.resting(START)
+            steps.append(Step(Transition(Kind.TRANSIT, rest, rest, label), (label, cb.approach)))
+            grasp(e.b)
+        elif e.kind == EdgeKind.TRANSFER:
+            steps.append(Step(Transition(Kind.TRANSFER, held(e.a), held(e.a), label), (ca.lift, label, cb.lift[::-1])))
+        elif e.kind == EdgeKind.REGRASP:
+            release(e.a)
+            rest = Mode.resting(e.a.placement)
+            steps.append(Step(Transition(Kind.TRANSIT, rest, rest, label), (ca.approach[::-1], label, cb.approach)))
+            grasp(e.b)
+        elif e.kind == EdgeKind.HANDOVER:
+            ex = g.exchanges[e]
+            a, b = e.a.hand, e.b.hand
+            both = Mode.held(**{a: grasp_id(a, e.a.grasp), b: grasp_id(b, e.b.grasp)})
+            steps += [Step(Transition(Kind.TRANSFER, held(e.a), held(e.a), label + ":carry"),
+                           (ca.lift, label + ":carry", ex.approach)),
+                      Step(Transition(Kind.HANDOVER, held(e.a), both, f"close_{b}", (b,)),
+                           (ex.approach[-1:], ex.q_both[None])),
+                      Step(Transition(Kind.HANDOVER, both, held(e.b), f"open_{a}", (a,)),
+                           (ex.q_both[None], ex.q_release[None])),
+                      Step(Transition(Kind.TRANSFER, held(e.b), held(e.b), label + ":place"),
+                           (ex.retreat, label + ":place", cb.lift[::-1]))]
+        else:  # LEAVE
+            release(e.a)
+            rest = Mode.resting(GOAL)
+            steps.append(Step(Transition(Kind.TRANSIT, rest, rest, label), (ca.approach[::-1], label)))
+    return steps
+
+
+def _search_and_solve(g: _Graph, style, clock: dict, stable: list[StablePlacement], problem: Problem):
+    """The first path whose motions all succeed, with its labels; raises PlanningFailed."""
+    o = g.options
+    t0 = time.perf_counter()
+    g.add_nodes([START, GOAL])
+    t0 = tick(clock, "nodes", t0)
+    more = style.placements and bool(stable)
+    out = successors(g.configs, style, g.compatible)
+    last = None
+    for attempt in range(o.graph_attempts):
+        path = search(out, g.length, g.blocked)
+        if more and (path is None or sum(e.kind.regrasps for e in path) >= 1):
+            # every path without a regrasp failed: intermediate placements may help now
+            t0 = tick(clock, "search", t0)
+            extra = intermediate_placements(problem, stable, o, g.shoulder, g.reach)
+            g.placements.update(extra)
+            g.counts["intermediate_placements"] = len(extra)
+            g.add_nodes(list(extra), intermediate=True)
+            t0 = tick(clock, "nodes", t0)
+            out = successors(g.configs, style, g.compatible)
+            more = False
+            path = search(out, g.length, g.blocked)
+        t0 = tick(clock, "search", t0)
+        if path is None:
+            break
+        g.counts["paths_tried"] = attempt + 1
+        labels = [_label(e) for e in path]
+        last = g.solve(path, labels)
+        t0 = tick(clock, "motions", t0)
+        if last is None:
+            return path, labels
+    raise _no_path(g, style, last)
+
+
+def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
+    """Why no path was found: no node at the start or goal, or the last edge that failed."""
+    for pid in (START, GOAL):
+        if not any(n.placement == pid for n in g.configs):
+            return PlanningFailed(Stage.GRASPS, f"no hand reaches a collision-free grasp of the object at its {pid} "
+                                                "pose")
+    tried = g.counts["paths_tried"]
+    if last is None and not tried:
+        return PlanningFailed(Stage.GRASPS, f"no {style.name} path joins the start and the goal in the manipulation "
+                                            f"graph ({len(g.configs)} grasp-placement nodes)")
+    if last is None:
+        return PlanningFailed(Stage.TRANSITION, f"every path of the manipulation graph failed ({tried} tried, "
+                                                f"{len(g.blocked)} edges blocked)")
+    return PlanningFailed(Stage.TRANSITION, f"{g.why.get(last, 'no path')} (the last of {tried} paths of the "
+                                            f"manipulation graph tried, {len(g.blocked)} edges blocked)",
+                          _label(last))
+
+
+LEVELS = {"auto": ("one-arm", "handover", "place-regrasp"), "one-arm": ("one-arm",), "handover": ("handover",),
+          "place-regrasp": ("place-regrasp",)}
+
+
+def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions, seed: int,
+         stable: list[StablePlacement] = (), graph: GraphOptions = GraphOptions()) -> Outcome:
+    """Plan the manipulation with the fewest regrasps in ``graph.style``; ``stable``: the
+    object's stable placements (none: no intermediate placement).  A failure is the
+    Outcome's ``failure``.
+
+    ``auto`` tries the styles in order of the regrasps they need: one arm (none), then
+    a hand-over (one; the hand-over task of Saut et al. 2010, whose double grasps and
+    exchange search are tuned for it), then intermediate placements (one or more); the
+    first that succeeds is the plan, and ``counts["styles"]`` says why the ones before
+    it were not used."""
+    why, clock, last = {}, {}, None
+    for name in LEVELS[graph.style]:
+        if name == "handover":
+            out = handover.plan(problem, lists, roadmap, options, seed)
+            if out.failure is None:
+                out = replace(out, counts=dict(out.counts, style="handover", regrasps=1, placements=0))
+        else:
+            out = _graph_plan(problem, lists, roadmap, options, seed, stable, graph, STYLES[name])
+        clock.update({f"{name}: {k}": v for k, v in out.stages.items()})
+        if out.failure is None:
+            return replace(out, stages=clock, counts=dict(out.counts, styles=dict(why, **{name: "chosen"})))
+        why[name] = str(out.failure.reason)
+        last = out
+        if out.failure.stage == Stage.ENDS:
+            break  # the robot's own start or goal: no style helps
+    reason = "; ".join(f"{k}: {v}" for k, v in why.items()) if len(why) > 1 else last.failure.reason
+    return replace(last, stages=clock, counts=dict(last.counts, styles=why),
+                   failure=PlanningFailed(last.failure.stage, reason, last.failure.transition))
+
+
+def _graph_plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
+                seed: int, stable: list[StablePlacement], graph: GraphOptions, style) -> Outcome:
+    """The manipulation graph's plan in one ``style`` (a :class:`graph.Style`)."""
+    scratch = Scratch(problem, options)
+    task = problem.spec.task
+    placements = {START: task.X_WO_start, GOAL: task.X_WO_goal}
+    clock = dict.fromkeys(STAGES, 0.0)
+    g = _Graph(scratch, lists, roadmap, placements, graph, seed)
+    try:
+        check_ends(scratch, [(problem.q_start, task.X_WO_start, "start"), (problem.q_goal, task.X_WO_goal, "goal")])
+        for h in HANDS:
+            if len(lists[h]) == 0:
+                raise PlanningFailed(Stage.GRASPS, f"the {h} hand's grasp list is empty: no grasp of the object was "
+                                                   f"found for it (`regrasp grasps build --hand {h}` says why)")
+        path, labels = _search_and_solve(g, style, clock, list(stable), problem)
+        t0 = time.perf_counter()
+        steps = steps_of(g, path, labels)
+        queries = [q for e, label in zip(path, labels) for q in g._queries(e, label)]
+        phases = time_steps(steps, g.paths, problem.robot.velocity, np.full(problem.robot.nq, options.acceleration),
+                            blend_check(scratch, queries) if options.blend else None)
+        tick(clock, "timing", t0)
+    except PlanningFailed as exc:
+        g.counts["checks"] = scratch.checks + _workers(g, options)
+        return Outcome(TASK, placements=dict(placements), stages=clock, transitions=g.table, counts=g.counts,
+                       failure=exc)
+    used = [n for e in path for n in (e.a, e.b) if n is not None]
+    grasps = tuple(dict.fromkeys((grasp_id(n.hand, n.grasp), n.hand, n.grasp) for n in used))
+    visited = {n.placement for n in used}
+    counts = dict(g.counts, style=style_of(path), regrasps=sum(e.kind.regrasps for e in path),
+                  placements=len(visited - {START, GOAL}), edges=[e.kind.value for e in path],
+                  waypoints=int(sum(len(p.waypoints) for p in phases)))
+    counts["checks"] = scratch.checks + _workers(g, options)
+    kept = {pid: X for pid, X in placements.items() if pid in visited | {START, GOAL}}
+    table = {label: g.table[q.label] for q, label in ((q, q.label) for q in queries)}
+    return Outcome(TASK, phases, grasps, kept, clock, table, counts)
+
+
+def _workers(g: _Graph, options: OnlineOptions) -> int:
+    return g.counts["query_checks"] if options.jobs > 1 else 0
