@@ -283,7 +283,7 @@ def test_no_build_refuses_a_missing_artefact(solved, cache_dir, tmp_path, missin
 # --------------------------------------------------------------------------- failures
 
 
-def test_unreachable_object_fails_at_double_grasps(solved, cache_dir, tmp_path):
+def test_unreachable_object_fails_at_grasps(solved, cache_dir, tmp_path):
     """The statuette on a small table 2.5 m to the robot's right: out of reach of both
     arms.  The grasp lists keep the grasps usable at the task's poses, so they are built
     for this scene; RRT-Connect needs no roadmap."""
@@ -300,7 +300,9 @@ def test_unreachable_object_fails_at_double_grasps(solved, cache_dir, tmp_path):
     m = re.fullmatch(r"error: planning failed at stage 'grasps': (.+)", lines[0])
     assert m, lines[0]
     reason = m.group(1)
-    assert "right-hand" in reason and "start pose" in reason
+    # every style says why: no hand reaches the statuette at its start pose
+    assert reason.startswith("one-arm: no hand reaches a collision-free grasp of the object at its start pose")
+    assert "handover: no hand reaches the start" in reason and "place-regrasp:" in reason
     d = json.loads(out.read_text())
     assert (d["format"], d["status"]) == ("regrasp.plan/2", "failed")
     assert d["failure"] == {"stage": "grasps", "transition": None, "reason": reason}

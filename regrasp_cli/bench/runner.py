@@ -63,6 +63,8 @@ class RunItem:
     roadmap_nodes: int
     grasp_target: int | None
     iterations: int = DEFAULT_ITERATIONS  # RRT-Connect iterations per query (every planner)
+    style: str = "auto"
+    exhaustive: int = 0
 
 
 def scene_labels(suite: Suite) -> dict[Path, str]:
@@ -86,7 +88,8 @@ def items_of(suite: Suite, cache_dir: Path, plan_dir: Path) -> list[RunItem]:
                 name = f"{labels[scene]}-{planner}-{seed}".replace("/", "_").replace(os.sep, "_")
                 items.append(RunItem(labels[scene], str(scene), planner, seed, str(Path(cache_dir).resolve()),
                                      str((plan_dir / f"{name}.json").resolve()), suite.budget_s,
-                                     suite.roadmap_nodes, suite.grasp_target, suite.iterations))
+                                     suite.roadmap_nodes, suite.grasp_target, suite.iterations, suite.style,
+                                     suite.exhaustive))
     return items
 
 
@@ -101,8 +104,8 @@ def offline_stages(suite: Suite, cache_dir: Path, jobs: int, builder=None) -> di
     """Per scene label: seconds and status (``built`` or ``cached``) of loading the
     problem, the grasp lists of both hands and the roadmap (when a planner needs it),
     building whichever is missing or stale, and of making the Super Graph ready."""
-    from regrasp_cli.artefacts import load_artefacts
-    from regrasp_cli.errors import EmptyResultError
+    from regrasp_cli.artefacts import load_artefacts, load_placements
+    from regrasp_cli.errors import EmptyResultError, InputError
     from regrasp_cli.manip.queries import Roadmap
     from regrasp_cli.scene import load_problem
 
@@ -134,6 +137,13 @@ def offline_stages(suite: Suite, cache_dir: Path, jobs: int, builder=None) -> di
                 rm = Roadmap.of(art)
                 row["super graph ready"] = {"s": time.perf_counter() - t0, "status": "loaded",
                                             "size": {"nodes": len(rm.nodes), "edges": len(rm.edges)}}
+        if suite.style in ("auto", "place-regrasp"):
+            t0 = time.perf_counter()
+            try:
+                found = load_placements(Path(cache_dir), problem, True)[0]
+                row["placements"] = {"s": time.perf_counter() - t0, "status": "ready", "size": {"stable": len(found)}}
+            except InputError as exc:  # no stable placement: the runs say so
+                row["placements"] = {"s": time.perf_counter() - t0, "status": f"empty ({exc.message})"}
         out[label] = row
     return out
 
@@ -197,7 +207,8 @@ def _base(item: RunItem) -> dict:
     return {"scene": item.scene, "planner": item.planner, "seed": item.seed, "solved": False,
             "stage": None, "transition": None, "reason": None, "total_s": None, "planner_s": None, "write_s": None,
             "validation_s": None, "stages_s": {}, "queries": {}, "validation": None, "path_length": None,
-            "regrasps": None, "motion_s": None, "waypoints": None, "plan": None, "peak_rss_mb": None}
+            "regrasps": None, "motion_s": None, "waypoints": None, "plan": None, "peak_rss_mb": None,
+            "style": None, "placements": None, "styles": None, "exhaustive": None}
 
 
 def peak_rss_mb() -> float:
@@ -210,7 +221,8 @@ def execute(item: RunItem) -> dict:
     """The run itself, in this process; raises whatever the planner raises."""
     from regrasp_cli.manip.context import OnlineOptions
     from regrasp_cli.manip.record import make_plan
-    from regrasp_cli.manip.tasks import handover
+    from regrasp_cli.artefacts import load_placements
+    from regrasp_cli.manip.tasks import handover, manipulation
     from regrasp_cli.trajectory import write_plan
     from regrasp_cli.validate import validate_plan
 
@@ -222,7 +234,15 @@ def execute(item: RunItem) -> dict:
                             rrt=replace(default.rrt, max_iterations=item.iterations))
     out_file = Path(item.plan_file)
     t0 = time.perf_counter()
-    outcome = handover.plan(problem, lists, roadmap if item.planner == REFERENCE else None, options, item.seed)
+    graph = {}
+    rm = roadmap if item.planner == REFERENCE else None
+    if item.style == "seed000":
+        outcome = handover.plan(problem, lists, rm, options, item.seed)
+    else:
+        stable = load_placements(Path(item.cache_dir), problem, False)[0] if item.style in ("auto", "place-regrasp") \
+            else []
+        outcome = manipulation.plan(problem, lists, rm, options, item.seed, stable,
+                                    manipulation.GraphOptions(style=item.style), keep=graph)
     t1 = time.perf_counter()
     plan = make_plan(problem, lists, outcome, options, item.seed, out_file, Path(item.cache_dir), hashes,
                      timings=True)
@@ -246,6 +266,12 @@ def execute(item: RunItem) -> dict:
                 "validation": {"valid": report.valid, "issues": len(report.issues),
                                "first_issues": [str(i) for i in report.issues[:3]],
                                "configurations_checked": int(report.configurations_checked)}})
+    rec.update({"style": outcome.counts.get("style", "handover"), "placements": outcome.counts.get("placements", 0),
+                "styles": outcome.counts.get("styles")})
+    if item.exhaustive and "graph" in graph:
+        t4 = time.perf_counter()
+        fewer, solved = manipulation.fewer_regrasps(graph["graph"], stable, rec["regrasps"], item.exhaustive)
+        rec["exhaustive"] = {"fewer_exist": fewer, "edges_solved": solved, "s": time.perf_counter() - t4}
     if report.valid:
         rec["solved"] = True
     else:

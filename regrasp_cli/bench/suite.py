@@ -6,7 +6,10 @@ integers; default 20); ``budget_s`` (wall-clock seconds per run, default 60); op
 ``iterations`` (RRT-Connect iterations per query, default 3000: the budget of the
 single-query planners, ours and OMPL's, and of the roadmap planner's fallback, so that
 every planner gets the same), ``roadmap_nodes`` (default 50) and ``grasp_target``
-(default: the grasp builder's).
+(default: the grasp builder's), ``style`` (as `regrasp plan --style`, default ``auto``)
+and ``exhaustive`` (default false: after each solved run, look for a path of fewer
+regrasps over the same manipulation graph, solving the motions of every edge it needs, up
+to ``exhaustive`` edges; the record says whether the plan's count is the minimum).
 Every error is an :class:`~regrasp_cli.errors.InputError` naming the file and field.
 """
 
@@ -29,6 +32,7 @@ REFERENCE = "roadmap"
 DEFAULT_SEEDS = 20
 DEFAULT_BUDGET_S = 60.0
 DEFAULT_ITERATIONS = 3000  # OnlineOptions().rrt.max_iterations
+STYLES = ("auto", "one-arm", "handover", "place-regrasp", "seed000")  # regrasp plan --style
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -43,6 +47,8 @@ class Suite:
     roadmap_nodes: int = RoadmapOptions.nodes
     grasp_target: int | None = None
     iterations: int = DEFAULT_ITERATIONS
+    style: str = "auto"
+    exhaustive: int = 0  # edges whose motions the exhaustive check may solve per run (0: no check)
 
 
 def _planners(file: Path | None, field: str, names: list) -> tuple[str, ...]:
@@ -61,7 +67,7 @@ def load_suite(path: str | Path) -> Suite:
     file, data = read_yaml(path)
     f = Fields(file, data)
     f.only("format", "name", "scenes", "planners", "seeds", "budget_s", "iterations", "roadmap_nodes",
-           "grasp_target")
+           "grasp_target", "style", "exhaustive")
     fmt = f.str("format")
     if fmt != SUITE_FORMAT:
         raise f.error("format", f"expected {SUITE_FORMAT!r}, found {fmt!r}")
@@ -85,8 +91,11 @@ def load_suite(path: str | Path) -> Suite:
     target = f.data.get("grasp_target")
     if target is not None:
         target = f.int("grasp_target", minimum=0)
+    style = f.str("style", "auto")
+    if style not in STYLES:
+        raise f.error("style", f"expected one of {', '.join(STYLES)}, found {style!r}")
     return Suite(file, name, scene_paths, _planners(file, "planners", planners), seeds, float(budget), nodes, target,
-                 iterations)
+                 iterations, style, f.int("exhaustive", 0, minimum=0))
 
 
 def seeds_of(file: Path | None, field: str, value) -> tuple[int, ...]:

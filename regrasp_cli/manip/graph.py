@@ -174,3 +174,47 @@ def fewest_regrasps(nodes: Iterable[Node], out, feasible: Callable[[Edge], bool]
             return None
         reached = close(reached | more)
     return None
+
+
+def type2(a: Node, b: Node) -> tuple[list[Edge], list[Edge]]:
+    """The two Type-2 paths a Type-1 edge a -> b (§III-D, Fig. 4: another grasp at another
+    placement, not physically realizable as such) expands to: Type-2a, a transfer to
+    (g_a, p_b) then a regrasp there; Type-2b, a regrasp to (g_b, p_a) then a transfer.
+    A piece between equal nodes is left out (a == b gives two empty paths)."""
+    via_a, via_b = Node(a.hand, a.grasp, b.placement), Node(b.hand, b.grasp, a.placement)
+    t2a = [Edge(EdgeKind.TRANSFER, a, via_a), Edge(EdgeKind.REGRASP, via_a, b)]
+    t2b = [Edge(EdgeKind.REGRASP, a, via_b), Edge(EdgeKind.TRANSFER, via_b, b)]
+    return ([e for e in t2a if e.a != e.b], [e for e in t2b if e.a != e.b])
+
+
+def optimise(path: list[Edge], connect: Callable[[list[Edge]], bool], rounds: int = 10) -> list[Edge]:
+    """Harada et al. 2014 §V, Fig. 6, iterated until nothing changes: two transfers in a
+    row become one transfer (transfer-transfer), two regrasps at one placement one regrasp
+    (transit-transit), and two Type-2 pairs (transfer + regrasp, twice) one Type-2 pair
+    from the first node to the last (Type2-Type2), when ``connect(edges)`` says the
+    replacement's motions exist (it solves them; an empty replacement, a move there and
+    back, always does).  Fewer regrasps or placements, never more."""
+    path = list(path)
+    for _ in range(rounds):
+        changed = False
+        i = 0
+        while i < len(path) - 1:
+            e, f = path[i], path[i + 1]
+            new = None
+            if e.kind == f.kind and e.kind in (EdgeKind.TRANSFER, EdgeKind.REGRASP):
+                new = [] if e.a == f.b else [Edge(e.kind, e.a, f.b)]  # there and back: nothing
+            elif (i + 3 < len(path) and [x.kind for x in path[i:i + 4]] == [EdgeKind.TRANSFER, EdgeKind.REGRASP] * 2
+                  and e.a.placement != path[i + 3].b.placement):
+                new = next((t for t in type2(e.a, path[i + 3].b) if len(t) == 2 and connect(t)), None)
+                if new is not None:
+                    path[i:i + 4] = new
+                    changed = True
+                    continue
+            if new is not None and connect(new):
+                path[i:i + 2] = new
+                changed = True
+                continue
+            i += 1
+        if not changed:
+            break
+    return path

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from regrasp_cli.manip.graph import GOAL, START, STYLES, EdgeKind, Node, fewest_regrasps, search, style_of, \
-    successors
+from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, search, \
+    style_of, successors, type2
 
 R0S, R0G = Node("right", 0, START), Node("right", 0, GOAL)
 L1G = Node("left", 1, GOAL)
@@ -61,18 +61,18 @@ def test_an_intermediate_placement_turns_the_grasp():
 
 def test_the_search_finds_the_fewest_regrasps_on_random_graphs():
     seen = set()
-    for seed in range(40):  # half of the edges infeasible: from no path to 3 regrasps
+    for seed in range(60):  # half of the edges infeasible: from no path to 4 regrasps
         rng = np.random.default_rng(seed)
         places = [START, GOAL, "p1", "p2"]
         nodes = {Node(h, int(k), p) for h in ("right", "left") for k in range(3) for p in places if rng.random() < 0.5}
         out = successors(nodes, STYLES["auto"], lambda a, b: (a.grasp + b.grasp) % 3 != 0)
-        infeasible = {e for a in [None, *nodes] for e in out(a) if rng.random() < 0.5}
+        infeasible = {e for a in [None, *sorted(nodes)] for e in out(a) if rng.random() < 0.5}
         lengths = {}
         path = search(out, lambda e: lengths.setdefault(e, float(rng.random())), infeasible)
         least = fewest_regrasps(nodes, out, lambda e: e not in infeasible)
         seen.add(least)
         _check(path, least, infeasible)
-    assert {None, 0, 1, 2, 3} <= seen
+    assert {None, 0, 1, 2, 3, 4} <= seen
 
 
 def _check(path, least, infeasible):
@@ -83,3 +83,45 @@ def _check(path, least, infeasible):
         assert all(e not in infeasible for e in path)
         assert path[0].kind == EdgeKind.ARRIVE and path[-1].kind == EdgeKind.LEAVE
         assert all(e.b == f.a for e, f in zip(path, path[1:]))  # a connected chain
+
+
+def test_a_type1_edge_expands_into_the_two_type2_paths():
+    a, b = Node("right", 0, "p1"), Node("right", 1, "p2")
+    t2a, t2b = type2(a, b)
+    assert [(e.kind, e.a, e.b) for e in t2a] == [(EdgeKind.TRANSFER, a, Node("right", 0, "p2")),
+                                                 (EdgeKind.REGRASP, Node("right", 0, "p2"), b)]
+    assert [(e.kind, e.a, e.b) for e in t2b] == [(EdgeKind.REGRASP, a, Node("right", 1, "p1")),
+                                                 (EdgeKind.TRANSFER, Node("right", 1, "p1"), b)]
+    assert type2(a, Node("right", 0, "p2"))[0] == [Edge(EdgeKind.TRANSFER, a, Node("right", 0, "p2"))]
+
+
+def _chain(*nodes_kinds):
+    return [Edge(k, a, b) for a, k, b in nodes_kinds]
+
+
+def test_the_optimiser_merges_two_transfers_and_two_type2_pairs():
+    p2 = Node("right", 0, "p2")
+    found = _chain((None, EdgeKind.ARRIVE, R0S), (R0S, EdgeKind.TRANSFER, R0P), (R0P, EdgeKind.TRANSFER, p2),
+                   (p2, EdgeKind.REGRASP, Node("right", 1, "p2")), (Node("right", 1, "p2"), EdgeKind.TRANSFER, R1G),
+                   (R1G, EdgeKind.LEAVE, None))
+    tried = []
+
+    def connect(edges):
+        tried.append(edges)
+        return True
+    merged = optimise(found, connect)
+    assert tried[0] == [Edge(EdgeKind.TRANSFER, R0S, p2)]  # transfer-transfer first
+    assert _kinds(merged) == ["arrive", "transfer", "regrasp", "transfer", "leave"]
+    assert merged[1] == Edge(EdgeKind.TRANSFER, R0S, p2)
+
+    # two Type-2 pairs: via p1 and then p2, two regrasps, become one Type-2a pair into goal's grasp
+    q1, q2 = Node("right", 2, "p2"), Node("right", 2, GOAL)
+    two = _chain((None, EdgeKind.ARRIVE, R0S), (R0S, EdgeKind.TRANSFER, R0P), (R0P, EdgeKind.REGRASP, R1P),
+                 (R1P, EdgeKind.TRANSFER, Node("right", 1, "p2")), (Node("right", 1, "p2"), EdgeKind.REGRASP, q1),
+                 (q1, EdgeKind.TRANSFER, q2), (q2, EdgeKind.LEAVE, None))
+    merged = optimise(two, lambda edges: Node("right", 0, "p2") in [e.b for e in edges])
+    assert sum(e.kind.regrasps for e in merged) == 1
+    assert merged[1:3] == [Edge(EdgeKind.TRANSFER, R0S, Node("right", 0, "p2")),
+                           Edge(EdgeKind.REGRASP, Node("right", 0, "p2"), q1)]
+    # nothing connects: the path is kept as found
+    assert optimise(two, lambda edges: False) == two
