@@ -93,6 +93,7 @@ class _Graph:
         reach = joint_reach(p.robot)
         self.reach = {h: options.reach_factor * reach[p.robot.hands[h].arm_idx[0]] for h in HANDS}
         self.shoulder = {h: shoulder(scratch, h, p.robot.q_rest) for h in HANDS}
+        self.rest = {h: scratch.kin.fk(p.robot.q_rest, p.robot.hands[h].grasp_frame)[:3, 3] for h in HANDS}
         self.weights = joint_weights(p.robot)
 
     # ---------------------------------------------------------------- nodes
@@ -108,13 +109,18 @@ class _Graph:
             for hand in HANDS:
                 if not self._reachable(hand, X, pid):
                     continue
-                known = np.array(sorted({n.grasp for n in self.configs if n.hand == hand}), dtype=int)
                 rng = np.random.default_rng([self.seed, 30, HANDS.index(hand), list(self.placements).index(pid)])
                 before = self.scratch.checks
                 found = []
-                if len(known):  # grasps reached elsewhere first: a transfer can join them
-                    found, _ = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand], X,
-                                                     self.env, known, **limits)
+                # grasps reached at the start, then at the goal, first: transfers can join them
+                for end in (START, GOAL):
+                    known = np.array(sorted({n.grasp for n in self.configs if n.hand == hand and n.placement == end}),
+                                     dtype=int)
+                    if len(known):
+                        more, _ = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand], X,
+                                                        self.env, np.setdiff1d(known, [c.grasp for c in found]),
+                                                        **limits)
+                        found += more
                 more, _ = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand], X, self.env,
                                                 np.setdiff1d(np.arange(len(self.lists[hand])),
                                                              [c.grasp for c in found]), **limits)
@@ -135,6 +141,10 @@ class _Graph:
         rng = np.random.default_rng([self.seed, 31, HANDS.index(hand), list(self.placements).index(pid)])
         return solve_position(robot, robot.hands[hand].grasp_frame, nearest, robot.q_rest, idx, rng,
                               IKOptions(restarts=8)).success
+
+    def ends(self) -> dict[str, set[str]]:
+        """The hands with nodes at the start and at the goal."""
+        return {pid: {n.hand for n in self.configs if n.placement == pid} for pid in (START, GOAL)}
 
     def no_handover(self) -> str:
         """Why no hand can pick at the start and the other place at the goal, from the
@@ -242,25 +252,30 @@ def _label(e: Edge) -> str:
 
 
 def intermediate_placements(problem: Problem, stable: list[StablePlacement], options: GraphOptions,
-                            shoulders: dict[str, np.ndarray], reach: dict[str, float]) -> dict[str, np.ndarray]:
-    """``p1``, ``p2``...: per resting face (most stable first), the fit on the scene's
-    supports that both arms reach most easily (the least of its distances to the two
-    shoulders; else the nearest to one), ``intermediate`` at most."""
+                            hands_at: dict[str, np.ndarray], shoulders: dict[str, np.ndarray],
+                            reach: dict[str, float], ends: dict[str, set[str]]) -> dict[str, np.ndarray]:
+    """``p1``, ``p2``...: per resting face (most stable first), one fit on the scene's
+    supports, ``intermediate`` at most, where the hands that must use it work most easily:
+    nearest (horizontally) to where the hand rests (``hands_at``: its grasp frame at the
+    rest configuration), for a hand with nodes at both the start and the goal (``ends``:
+    the hands with nodes at each); else the fit whose farther distance to the rests of a
+    hand of each end is least.  Within every such hand's reach (``shoulders``, ``reach``)."""
     spec = problem.spec
     fitted = fit_placements(stable, scene_supports(spec.obstacles, spec.supports, spec.file), problem.object.mesh,
                             spec.obstacles, options.fit)
     if not len(fitted):
         return {}
     p = fitted.X_WO[:, :3, 3]
-    d = np.stack([np.linalg.norm(p - shoulders[h], axis=1) / reach[h] for h in HANDS])  # (2, n), 1: at the reach
+    near = {h: np.linalg.norm(p[:, :2] - hands_at[h][:2], axis=1) for h in HANDS}
+    within = {h: np.linalg.norm(p - shoulders[h], axis=1) <= reach[h] for h in HANDS}
+    both = sorted(ends[START] & ends[GOAL])
+    pairs = [(h, h) for h in both] or [(a, b) for a in ends[START] for b in ends[GOAL]] or [("right", "left")]
+    score = np.min([np.where(within[a] & within[b], np.maximum(near[a], near[b]), np.inf) for a, b in pairs], axis=0)
     out = {}
     for face in range(len(stable)):
-        ok = np.flatnonzero((fitted.stable == face) & (d.min(axis=0) <= 1.0))
-        if not len(ok):
-            continue
-        both = ok[d[:, ok].max(axis=0) <= 1.0]
-        best = both[np.argmin(d[:, both].max(axis=0))] if len(both) else ok[np.argmin(d[:, ok].min(axis=0))]
-        out[f"p{len(out) + 1}"] = fitted.X_WO[best]
+        idx = np.flatnonzero((fitted.stable == face) & np.isfinite(score))
+        if len(idx):
+            out[f"p{len(out) + 1}"] = fitted.X_WO[idx[np.argmin(score[idx])]]
         if len(out) == options.intermediate:
             break
     return out
@@ -332,7 +347,7 @@ def _search_and_solve(g: _Graph, style, clock: dict, stable: list[StablePlacemen
         if more and (path is None or sum(e.kind.regrasps for e in path) >= 1):
             # every path without a regrasp failed: intermediate placements may help now
             t0 = tick(clock, "search", t0)
-            extra = intermediate_placements(problem, stable, o, g.shoulder, g.reach)
+            extra = intermediate_placements(problem, stable, o, g.rest, g.shoulder, g.reach, g.ends())
             g.placements.update(extra)
             g.counts["intermediate_placements"] = len(extra)
             g.add_nodes(list(extra), intermediate=True)
@@ -481,7 +496,7 @@ def fewer_regrasps(g: _Graph, stable: list[StablePlacement], regrasps: int, budg
     if regrasps == 0:
         return False, 0
     if regrasps >= 2 and stable and not set(g.placements) - {START, GOAL}:
-        extra = intermediate_placements(g.scratch.problem, stable, g.options, g.shoulder, g.reach)
+        extra = intermediate_placements(g.scratch.problem, stable, g.options, g.rest, g.shoulder, g.reach, g.ends())
         g.placements.update(extra)
         g.add_nodes(list(extra), intermediate=True)
     solved = [0]
