@@ -37,8 +37,8 @@ class RegraspGroup(click.Group):
               show_default=True, envvar="REGRASP_CACHE", help="Where cached artefacts are kept.")
 @click.pass_context
 def main(ctx: click.Context, debug: bool, cache_dir: Path) -> None:
-    """Plan pick-and-place tasks with two-hand regrasping for dual-arm robots
-    (Saut et al., IROS 2010)."""
+    """Plan pick-and-place tasks for dual-arm robots with the fewest regrasps: one arm,
+    a hand-over (Saut et al., IROS 2010) or intermediate placements (Harada et al., ICRA 2014)."""
     ctx.obj = {"debug": debug, "cache_dir": cache_dir}
     if not debug:
         warnings.showwarning = _warning_line

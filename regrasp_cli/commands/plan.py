@@ -16,7 +16,8 @@ from rich.table import Table
 
 from regrasp_cli.artefacts import load_artefacts, load_placements
 from regrasp_cli.commands.report import CliBuilder
-from regrasp_cli.errors import EmptyGraspList, EmptyRoadmap
+from regrasp_cli.errors import EmptyGraspList, EmptyRoadmap, InputError
+from regrasp_cli.placement.supports import scene_supports
 from regrasp_cli.manip.context import OnlineOptions
 from regrasp_cli.manip.ompl_peer import ompl_version
 from regrasp_cli.manip.queries import Roadmap
@@ -72,26 +73,34 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     if planner == "ompl-rrtconnect":
         ompl_version()  # InputError naming the extra before anything is loaded
     problem = load_problem_shown(scene, cache_dir)
+    if style == "place-regrasp" and not scene_supports(problem.spec.obstacles, problem.spec.supports, scene):
+        raise InputError(scene, "obstacles", "--style place-regrasp puts the object down, and the scene has no "
+                                             "support surface (a box with an axis along z, or an upright cylinder)")
     seed = problem.spec.planning.seed if seed is None else seed
     options = OnlineOptions(planner=planner, jobs=jobs)
-    lists, art, hashes = {}, None, {}
+    lists, art, hashes, stable = {}, None, {}, []
     failure = handover.ends_failure(problem, options)  # before building anything for them
+    if failure is None and style in ("auto", "place-regrasp"):  # milliseconds: before the grasp lists
+        try:
+            stable, hashes["placements"] = load_placements(cache_dir, problem, build, CliBuilder(console))
+        except InputError as exc:
+            if style == "place-regrasp" or exc.field != "object.mesh":
+                raise  # placements the object does not have were asked for, or --no-build refused the file
+            # auto: no intermediate placement, and the summary says why
     if failure is None:
         try:
-            lists, art, hashes = load_artefacts(scene, cache_dir, problem, build, jobs, planner == "roadmap",
-                                                CliBuilder(console), roadmap_nodes, grasp_target)
+            lists, art, more = load_artefacts(scene, cache_dir, problem, build, jobs, planner == "roadmap",
+                                              CliBuilder(console), roadmap_nodes, grasp_target)
+            hashes.update(more)
         except (EmptyGraspList, EmptyRoadmap) as exc:
             failure = PlanningFailed(Stage.GRASPS if isinstance(exc, EmptyGraspList) else Stage.ROADMAP, exc.message)
+    roadmap = Roadmap.of(art) if art is not None else None
     if failure is not None:
         outcome = handover.failed(problem, failure)
     elif style == "seed000":
-        outcome = handover.plan(problem, lists, Roadmap.of(art) if art is not None else None, options, seed)
+        outcome = handover.plan(problem, lists, roadmap, options, seed)
     else:
-        stable = []
-        if style in ("auto", "place-regrasp"):
-            stable, hashes["placements"] = load_placements(cache_dir, problem, build, CliBuilder(console))
-        outcome = manipulation.plan(problem, lists, Roadmap.of(art) if art is not None else None, options, seed,
-                                    stable, GraphOptions(style=style))
+        outcome = manipulation.plan(problem, lists, roadmap, options, seed, stable, GraphOptions(style=style))
     plan = make_plan(problem, lists, outcome, options, seed, out_file, cache_dir, hashes, timings)
     write_plan(out_file, plan)
     if outcome.failure is not None:

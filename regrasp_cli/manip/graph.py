@@ -148,11 +148,15 @@ def search(out, length: Callable[[Edge], float], blocked: set[Edge] = frozenset(
     return None
 
 
-def fewest_regrasps(nodes: Iterable[Node], out, feasible: Callable[[Edge], bool], limit: int = 10) -> int | None:
+def fewest_regrasps(nodes: Iterable[Node], out, feasible: Callable[[Edge], bool], limit: int = 10,
+                    witness: bool = False):
     """The least number of regrasps of any path from the robot's start to its goal over
     the ``feasible`` edges, by a plain fix point (the nodes reached with r regrasps,
     closed under the edges that change no grasp, then one more regrasp); None when no path
-    has ``limit`` or fewer.  Independent of :func:`search`, to check it."""
+    has ``limit`` or fewer.  Independent of :func:`search`, to check it.  With
+    ``witness``, (count, one such path as a list of edges, or None)."""
+    parent: dict = {}
+
     def close(reached: set) -> set:
         todo = list(reached)
         while todo:
@@ -161,19 +165,34 @@ def fewest_regrasps(nodes: Iterable[Node], out, feasible: Callable[[Edge], bool]
                     b = GOAL if e.b is None else e.b
                     if b not in reached:
                         reached.add(b)
+                        parent[b] = e
                         if b != GOAL:
                             todo.append(b)
         return reached
 
+    def found(r: int):
+        if not witness:
+            return r
+        path, n = [], GOAL
+        while n is not None:
+            path.append(parent[n])
+            n = parent[n].a
+        return r, path[::-1]
+
     reached = close({None})
     for r in range(limit + 1):
         if GOAL in reached:
-            return r
-        more = {e.b for a in reached if a != GOAL for e in out(a) if e.kind.regrasps and feasible(e)}
-        if more <= reached:
-            return None
-        reached = close(reached | more)
-    return None
+            return found(r)
+        more = {}
+        for a in reached - {GOAL}:
+            for e in out(a):
+                if e.kind.regrasps and e.b not in reached and e.b not in more and feasible(e):
+                    more[e.b] = e
+        if not more:
+            break
+        parent.update(more)
+        reached = close(reached | set(more))
+    return (None, None) if witness else None
 
 
 def type2(a: Node, b: Node) -> tuple[list[Edge], list[Edge]]:

@@ -72,6 +72,9 @@ def test_the_search_finds_the_fewest_regrasps_on_random_graphs():
         least = fewest_regrasps(nodes, out, lambda e: e not in infeasible)
         seen.add(least)
         _check(path, least, infeasible)
+        count, witness = fewest_regrasps(nodes, out, lambda e: e not in infeasible, witness=True)
+        assert count == least
+        _check(witness, least, infeasible)  # the fix point's own path is one of fewest regrasps too
     assert {None, 0, 1, 2, 3, 4} <= seen
 
 

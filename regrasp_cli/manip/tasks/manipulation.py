@@ -8,23 +8,24 @@ Stages, each timed:
 1. ``nodes`` (§IV-B): for each hand and placement (the initial and target ones, then the
    intermediate ones), single-grasp configurations (IK and collision, with their approach
    and lift lines: :func:`doublegrasp.single_configurations`), the grasps already reached
-   elsewhere tried first so that transfers can join them.  A hand whose shoulder is
-   farther than its reach from a placement has no node there.  Intermediate placements
-   (:mod:`placement.supports`: stable placements fitted on the scene's supports, one per
-   resting face nearest the middle of the start and goal) are added only once every path
-   without a regrasp has failed: they cannot give fewer regrasps.
+   at the start and at the goal tried first so that transfers can join them.  A hand whose
+   grasp frame cannot get near the object (position-only IK) has no node there.
+   Intermediate placements (:mod:`placement.supports`: stable placements fitted on the
+   scene's supports, one per resting face, where the hands that must use them rest) are
+   added only once every path without a regrasp has failed: they cannot give fewer.
 2. ``search`` and ``motions`` (§IV-C), in turn: the path of fewest regrasps and then least
    joint-space length among the edges not found infeasible; its edges' motions are solved
-   (transit and transfer queries by the planner's path solver, straight first; a
-   hand-over edge first needs an exchange configuration, :func:`handover.exchange_near`);
-   an edge that fails is blocked and the search runs again, ``graph_attempts`` times at
-   most.  The first path whose motions all succeed is the plan: as every path with fewer
-   regrasps failed before it, its regrasp count is the least the graph's motions allow.
-3. ``timing``, as the hand-over's.
+   (transit and transfer queries by the planner's path solver; a hand-over edge first
+   needs an exchange configuration, :func:`handover.exchange_near`); an edge that fails is
+   blocked and the search runs again, ``graph_attempts`` times at most.  The first path
+   whose motions all succeed is the plan: as every path with fewer regrasps failed before
+   it, its regrasp count is the least the graph's motions allow.
+3. ``optimise`` (§V): :func:`graph.optimise`'s merges, each solved before it is kept.
+4. ``timing``, as the hand-over's.
 
 Type-1 edges (§III-D) are not in the graph: each is the Type-2 pair transfer + regrasp it
-expands to, so the search returns realizable paths directly.  Path optimisation (§V)
-merges consecutive transfers, which a search that minimises regrasps never returns.
+expands to (:func:`graph.type2`), so the search returns realizable paths directly.
+:func:`plan` runs the styles in order of the regrasps they need (see there).
 """
 
 from __future__ import annotations
@@ -395,8 +396,10 @@ def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
                                                 "pose")
     tried = g.counts["paths_tried"]
     if last is None and not tried:
+        none = " (no intermediate placement fits on the scene's supports)" if style.placements and \
+            g.counts.get("intermediate_placements") == 0 else ""
         return PlanningFailed(Stage.GRASPS, f"no {style.name} path joins the start and the goal in the manipulation "
-                                            f"graph ({len(g.configs)} grasp-placement nodes)")
+                                            f"graph ({len(g.configs)} grasp-placement nodes){none}")
     if last is None:
         return PlanningFailed(Stage.TRANSITION, f"every path of the manipulation graph failed ({tried} tried, "
                                                 f"{len(g.blocked)} edges blocked)")
@@ -489,39 +492,40 @@ def _graph_plan(g: _Graph, stable: list[StablePlacement], style) -> Outcome:
 
 def fewer_regrasps(g: _Graph, stable: list[StablePlacement], regrasps: int, budget: int) -> tuple[bool | None, int]:
     """Is there a path of fewer than ``regrasps`` regrasps over the manipulation graph
-    ``g`` of a run (every style; its intermediate placements added if the run had not),
-    each edge it needs solved here (:func:`graph.fewest_regrasps`, a plain fix point apart
-    from the search)?  (True, False, or None when ``budget`` edges were solved before it
-    could tell; edges solved).  The benchmark's check that a plan's count is the least."""
+    ``g`` of a run (every style; its intermediate placements added if the run had not)?
+    (True, False, or None when ``budget`` edges were solved before it could tell; edges
+    solved).  The benchmark's check that a plan's count is the least: the plain fix point
+    of :func:`graph.fewest_regrasps` (apart from the search) over the edges not known to
+    fail gives a path of fewer regrasps, if any; its edges are solved; one that fails is
+    known to fail, and again, until a path's edges all succeed or none is left."""
     if regrasps == 0:
         return False, 0
     if regrasps >= 2 and stable and not set(g.placements) - {START, GOAL}:
         extra = intermediate_placements(g.scratch.problem, stable, g.options, g.rest, g.shoulder, g.reach, g.ends())
         g.placements.update(extra)
         g.add_nodes(list(extra), intermediate=True)
-    solved = [0]
-
-    def feasible(e: Edge) -> bool:
-        if e in g.blocked:
-            return False
-        if e.kind != EdgeKind.HANDOVER or e in g.exchanges:
-            if all(q.label in g.paths for q in g._queries(e, _label(e))):
-                return True
-        if solved[0] >= budget:
-            raise _Budget
-        solved[0] += 1
-        return g.solve([e], [_label(e)]) is None
-
     out = successors(g.configs, STYLES["auto"], g.compatible)
-    try:
-        least = fewest_regrasps(g.configs, out, feasible, limit=regrasps - 1)
-    except _Budget:
-        return None, solved[0]
-    return least is not None, solved[0]
+    solved = 0
+    while True:
+        least, path = fewest_regrasps(g.configs, out, lambda e: e not in g.blocked, limit=regrasps - 1, witness=True)
+        if least is None:
+            return False, solved
+        for e in path:
+            if _solved(g, e):
+                continue
+            if solved >= budget:
+                return None, solved
+            solved += 1
+            if g.solve([e], [_label(e)]) is not None:
+                break  # blocked now: look again
+        else:
+            return True, solved
 
 
-class _Budget(Exception):
-    """The exhaustive check's edge budget is spent."""
+def _solved(g: _Graph, e: Edge) -> bool:
+    if e.kind == EdgeKind.HANDOVER and e not in g.exchanges:
+        return False
+    return all(q.label in g.paths for q in g._queries(e, _label(e)))
 
 
 def _workers(g: _Graph, options: OnlineOptions) -> int:
