@@ -265,14 +265,18 @@ def test_validate_rejects_a_grasp_that_misses_the_object(solved):
 # --------------------------------------------------------------------------- missing artefacts
 
 
-@pytest.mark.parametrize("missing, build", [("grasps", "regrasp grasps build"), ("roadmap", "regrasp roadmap build")])
+ORDER = ("placements", "grasps", "roadmap")  # the artefacts `plan` loads, in turn
+
+
+@pytest.mark.parametrize("missing, build", [("placements", "regrasp placements build"),
+                                            ("grasps", "regrasp grasps build"), ("roadmap", "regrasp roadmap build")])
 def test_no_build_refuses_a_missing_artefact(solved, cache_dir, tmp_path, missing, build):
     """A cache with the self-collision pairs (slow to compute, not an artefact of `plan`)
-    and, for the roadmap case, the grasp lists: the first missing artefact is named."""
+    and the artefacts `plan` loads before the missing one: that one is named."""
     d = tmp_path / "cache"
     shutil.copytree(Path(cache_dir) / "self_collision", d / "self_collision")
-    if missing == "roadmap":
-        shutil.copytree(Path(cache_dir) / "grasps", d / "grasps")
+    for before in ORDER[:ORDER.index(missing)]:
+        shutil.copytree(Path(cache_dir) / before, d / before)
     out = tmp_path / "plan.json"
     result = plan(d, out, "--no-build")
     line = assert_one_error_line(result, str(d / missing), "no such artefact", build)
