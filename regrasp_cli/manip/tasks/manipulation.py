@@ -372,8 +372,8 @@ def _optimised(g: _Graph, path: list[Edge], clock: dict, t0: float) -> tuple[lis
     """The path after §V's merges (:func:`graph.optimise`), whose new edges' motions are
     solved here; regrasps and placements before and after in the counts."""
     def connect(edges: list[Edge]) -> bool:
-        if any(n is not None and n not in g.configs for e in edges for n in (e.a, e.b)):
-            return False
+        if any(e in g.blocked or any(n is not None and n not in g.configs for n in (e.a, e.b)) for e in edges):
+            return False  # a node the graph has not, or an edge already failed
         return g.solve(edges, [_label(e) for e in edges]) is None
 
     before = (sum(e.kind.regrasps for e in path), len(_intermediate(path)))
