@@ -88,7 +88,7 @@ def test_the_regrasp_count_is_the_least_over_the_graph(cache):
 
 def test_a_forced_style_that_cannot_work_fails_with_its_reason(cache, tmp_path):
     result, plan = _plan(cache, SCENES / "hironx_upside_down.yaml", tmp_path / "plan.json", "--style", "one-arm")
-    line = assert_one_error_line(result, "no one-arm path", exit_code=1)
+    line = assert_one_error_line(result, "no one-arm path", "right hand: goal", exit_code=1)
     assert "handover" not in line and "place-regrasp" not in line
     assert plan["status"] == "failed"
 

@@ -158,23 +158,34 @@ def phase_worlds(scratch: Scratch, X_PO: np.ndarray, attached: str | None, finge
 # ------------------------------------------------------------------ double grasps
 
 
+def single_stream(seed: int, hand: str) -> list[int]:
+    """The random stream of a hand's single-grasp configurations (at the start for the
+    picking hand, at the goal for the placing one)."""
+    return [seed, 10 + ("right", "left").index(hand)]
+
+
 def _single_job(j: dict, hand: str):
     """Single-grasp configurations of one hand (in a forked worker, or in this process)."""
     scratch = j["scratch"]
-    rng = np.random.default_rng([j["seed"], 10 + ("right", "left").index(hand)])
+    rng = np.random.default_rng(single_stream(j["seed"], hand))
     before = scratch.checks
     found, stats = single_configurations(scratch, rng, *j["singles"][hand])
     return found, stats, scratch.checks - before
 
 
 def _double_grasps(scratch: Scratch, lists: dict[str, GraspList], shapes: dict, env: StaticGeometry, g: str,
-                   seed: int) -> tuple[list[DoubleGrasp] | str, dict]:
-    """Double grasps with hand ``g`` picking, best first, or why there are none; and counts."""
+                   seed: int, known: dict) -> tuple[list[DoubleGrasp] | str, dict]:
+    """Double grasps with hand ``g`` picking, best first, or why there are none; and counts.
+    ``known``: (hand, "start" or "goal") -> (configurations, stats) already found with
+    this task's random stream of that hand (:func:`single_stream`)."""
     task, t = scratch.problem.spec.task, OTHER[g]
     # the two hands' searches are independent: in parallel, each with its own random stream
     job = {"scratch": scratch, "seed": seed, "singles": {g: (lists[g], shapes[g], task.X_WO_start, env),
                                                          t: (lists[t], shapes[t], task.X_WO_goal, env)}}
-    (cfg_g, st_g, n_g), (cfg_t, st_t, n_t) = ordered_map(_single_job, [g, t], scratch.options.jobs, job)
+    ends = {g: "start", t: "goal"}
+    todo = [h for h in (g, t) if (h, ends[h]) not in known]
+    done = dict(zip(todo, ordered_map(_single_job, todo, scratch.options.jobs, job)))
+    (cfg_g, st_g, n_g), (cfg_t, st_t, n_t) = (done[h] if h in done else (*known[(h, ends[h])], 0) for h in (g, t))
     counts = {"single_checks": n_g + n_t, "single_grasps": {g: st_g.__dict__, t: st_t.__dict__}}
     for hand, cfgs, st, where in ((g, cfg_g, st_g, "start"), (t, cfg_t, st_t, "goal")):
         if not cfgs:
@@ -205,7 +216,8 @@ def _new(ks: np.ndarray, found: list) -> np.ndarray:
     return ks[~np.isin(ks, [c.grasp for c in found])]
 
 
-def choose_hands(scratch: Scratch, lists: dict[str, GraspList], seed: int) -> tuple[str, list[DoubleGrasp], dict]:
+def choose_hands(scratch: Scratch, lists: dict[str, GraspList], seed: int,
+                 known: dict | None = None) -> tuple[str, list[DoubleGrasp], dict]:
     """The picking hand and its double grasps: the hand nearer the start first, the
     other when it cannot.  Raises _Failed (Stage.GRASPS) when neither can."""
     problem = scratch.problem
@@ -220,7 +232,7 @@ def choose_hands(scratch: Scratch, lists: dict[str, GraspList], seed: int) -> tu
     guess = picking_hand(problem, scratch)
     failures, counts = [], {"single_checks": 0}
     for g in (guess, OTHER[guess]):
-        found, c = _double_grasps(scratch, lists, shapes, env, g, seed)
+        found, c = _double_grasps(scratch, lists, shapes, env, g, seed, known or {})
         counts["single_checks"] += c.pop("single_checks")
         if not failures or isinstance(found, list):
             counts.update(c)  # the first hand's counts, or those of the hand that succeeded
@@ -402,8 +414,9 @@ def failed(problem: Problem, failure: PlanningFailed) -> Outcome:
 
 
 def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
-         seed: int) -> Outcome:
-    """Plan the pick, hand-over and place; a failure is the Outcome's ``failure``."""
+         seed: int, known: dict | None = None) -> Outcome:
+    """Plan the pick, hand-over and place; a failure is the Outcome's ``failure``.
+    ``known``: single-grasp configurations already found (see :func:`_double_grasps`)."""
     scratch = Scratch(problem, options)
     weights = roadmap.weights if roadmap is not None else joint_weights(problem.robot)
     if options.planner == "ompl-rrtconnect":
@@ -414,7 +427,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     try:
         check_ends(scratch, _ends(problem))
         try:
-            g, doubles, c = choose_hands(scratch, lists, seed)
+            g, doubles, c = choose_hands(scratch, lists, seed, known)
             counts.update(c)
             t0 = tick(clock, "double grasps", t0)
             dg, ex, steps, queries, paths, table, c = _keys_and_paths(scratch, roadmap, weights, seed, lists, g, doubles, clock)

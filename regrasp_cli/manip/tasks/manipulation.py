@@ -85,6 +85,8 @@ class _Graph:
         self.env = static_geometry(p.spec.obstacles)
         self.shapes = {h: hand_shapes(p.robot, h, lists[h].finger_q, p.spec.planning.contact_tolerance) for h in HANDS}
         self.configs: dict[Node, SingleConfig] = {}
+        self.searched: set[tuple[str, str]] = set()  # (hand, placement) searched in full
+        self.singles: dict = {}  # (hand, start or goal) -> the hand-over task's single configurations, stats
         self.blocked: set[Edge] = set()
         self.why: dict[Edge, str] = {}
         self.exchanges: dict[Edge, ExchangeConfig] = {}
@@ -99,20 +101,33 @@ class _Graph:
 
     # ---------------------------------------------------------------- nodes
 
-    def add_nodes(self, pids: list[str], intermediate: bool = False) -> None:
-        """Single-grasp configurations of each hand at each placement of ``pids`` (fewer,
-        from fewer grasps and without the torso's help, at ``intermediate`` ones)."""
+    def add_nodes(self, pids: list[str], intermediate: bool = False, hands: tuple[str, ...] = HANDS) -> None:
+        """Single-grasp configurations of the ``hands`` at each placement of ``pids``
+        (fewer, from fewer grasps and without the torso's help, at ``intermediate``
+        ones), each (hand, placement) searched once."""
         o = self.options
         limits = dict(wanted=o.intermediate_nodes, attempts=o.intermediate_attempts, lean=False) if intermediate \
             else {}
         for pid in pids:
             X = self.placements[pid]
-            for hand in HANDS:
+            for hand in hands:
+                if (hand, pid) in self.searched:
+                    continue
+                self.searched.add((hand, pid))
                 if not self._reachable(hand, X, pid):
                     continue
-                rng = np.random.default_rng([self.seed, 30, HANDS.index(hand), list(self.placements).index(pid)])
                 before = self.scratch.checks
-                found = []
+                if pid in (START, GOAL):
+                    # the hand-over task's own search of the hand at that end, which it reuses
+                    rng = np.random.default_rng(handover.single_stream(self.seed, hand))
+                    found, stats = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand], X,
+                                                         self.env)
+                    self.singles[(hand, pid)] = (found, stats)
+                    self.counts["single_checks"] += self.scratch.checks - before
+                    self.configs.update({Node(hand, c.grasp, pid): c for c in found})
+                    continue
+                rng = np.random.default_rng([self.seed, 30, HANDS.index(hand), list(self.placements).index(pid)])
+                found = [c for n, c in self.configs.items() if n.hand == hand and n.placement == pid]
                 # grasps reached at the start, then at the goal, first: transfers can join them
                 for end in (START, GOAL):
                     known = np.array(sorted({n.grasp for n in self.configs if n.hand == hand and n.placement == end}),
@@ -128,6 +143,30 @@ class _Graph:
                 self.counts["single_checks"] += self.scratch.checks - before
                 for c in found + more:
                     self.configs[Node(hand, c.grasp, pid)] = c
+
+    def one_arm_nodes(self) -> None:
+        """The nodes a one-arm path can use, cheaply: each hand at the end nearer its
+        shoulder (searched in full), then at the other end only with the grasps it has
+        at the first (a transfer keeps the grasp), when it has any.  IK that fails is
+        the slow part: a hand that cannot do both ends fails on a few grasps, not 80."""
+        task = self.scratch.problem.spec.task
+        for hand in HANDS:
+            d = {pid: np.linalg.norm(X[:3, 3] - self.shoulder[hand])
+                 for pid, X in ((START, task.X_WO_start), (GOAL, task.X_WO_goal))}
+            first, second = sorted(d, key=d.get)
+            self.add_nodes([first], hands=(hand,))
+            known = np.array(sorted({n.grasp for n in self.configs if n.hand == hand and n.placement == first}),
+                             dtype=int)
+            if not len(known) or (hand, second) in self.searched or not self._reachable(
+                    hand, self.placements[second], second):
+                continue
+            rng = np.random.default_rng([self.seed, 32, HANDS.index(hand)])
+            before = self.scratch.checks
+            found, _ = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand],
+                                             self.placements[second], self.env, known, wanted=len(known))
+            self.counts["single_checks"] += self.scratch.checks - before
+            for c in found:
+                self.configs[Node(hand, c.grasp, second)] = c
 
     def _reachable(self, hand: str, X_WO: np.ndarray, pid: str) -> bool:
         """Can the hand's grasp frame get to the grasp position nearest its shoulder at all
@@ -151,8 +190,9 @@ class _Graph:
         """Why no hand can pick at the start and the other place at the goal, from the
         nodes found there (the hand-over task would search the same configurations
         again), or "" when a pair exists or the nodes were not searched yet."""
-        have = {(n.hand, n.placement) for n in self.configs}
-        if not have or any((h, START) in have and (OTHER[h], GOAL) in have for h in HANDS):
+        have = {(n.hand, n.placement) for n in self.configs if (n.hand, n.placement) in self.searched}
+        maybe = have | ({(h, p) for h in HANDS for p in (START, GOAL)} - self.searched)  # not searched in full yet
+        if any((h, START) in maybe and (OTHER[h], GOAL) in maybe for h in HANDS):
             return ""
         return "no hand reaches the start while the other reaches the goal (" + ", ".join(
             f"{h} hand: {', '.join(p for p in (START, GOAL) if (h, p) in have) or 'neither'}" for h in HANDS) + ")"
@@ -337,8 +377,10 @@ def _search_and_solve(g: _Graph, style, clock: dict, stable: list[StablePlacemen
     """The first path whose motions all succeed, with its labels; raises PlanningFailed."""
     o = g.options
     t0 = time.perf_counter()
-    if not any(n.placement in (START, GOAL) for n in g.configs):  # once per run, whatever the style
-        g.add_nodes([START, GOAL])
+    if style.handover or style.placements:
+        g.add_nodes([START, GOAL])  # in full (each hand and end once per run)
+    else:
+        g.one_arm_nodes()
     t0 = tick(clock, "nodes", t0)
     more = style.placements and bool(stable) and not (set(g.placements) - {START, GOAL})
     out = successors(g.configs, style, g.compatible)
@@ -391,10 +433,16 @@ def _intermediate(path: list[Edge]) -> set[str]:
 def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
     """Why no path was found: no node at the start or goal, or the last edge that failed."""
     for pid in (START, GOAL):
-        if not any(n.placement == pid for n in g.configs):
+        if not any(n.placement == pid for n in g.configs) and all((h, pid) in g.searched for h in HANDS):
             return PlanningFailed(Stage.GRASPS, f"no hand reaches a collision-free grasp of the object at its {pid} "
                                                 "pose")
     tried = g.counts["paths_tried"]
+    if not (style.handover or style.placements) and last is None and not tried:
+        have = {(n.hand, n.placement) for n in g.configs}
+        ends = ", ".join(f"{h} hand: " + (" and ".join(p for p in (START, GOAL) if (h, p) in have) or "neither end")
+                         for h in HANDS)
+        return PlanningFailed(Stage.GRASPS, f"no one-arm path: no hand holds the object at both the start and the "
+                                            f"goal with one grasp ({ends})")
     if last is None and not tried:
         none = " (no intermediate placement fits on the scene's supports)" if style.placements and \
             g.counts.get("intermediate_placements") == 0 else ""
@@ -439,10 +487,15 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         keep["graph"] = g
     why, clock, last = {}, {}, None
     for name in LEVELS[graph.style]:
-        if name == "handover" and g.no_handover():
-            out = Outcome(TASK, failure=PlanningFailed(Stage.GRASPS, g.no_handover()))
-        elif name == "handover":
-            out = handover.plan(problem, lists, roadmap, options, seed)
+        if name == "handover":
+            t0 = time.perf_counter()
+            g.add_nodes([START, GOAL])  # both hands at both ends: the hand-over's single grasps
+            nodes = {"nodes": time.perf_counter() - t0}
+            if g.no_handover():
+                out = Outcome(TASK, stages=nodes, failure=PlanningFailed(Stage.GRASPS, g.no_handover()))
+            else:
+                out = handover.plan(problem, lists, roadmap, options, seed, g.singles)
+                out = replace(out, stages={**nodes, **out.stages})
             if out.failure is None:
                 out = replace(out, counts=dict(out.counts, style="handover", regrasps=1, placements=0))
         elif name == "place-regrasp" and not stable:
