@@ -186,6 +186,18 @@ class _Graph:
         """The hands with nodes at the start and at the goal."""
         return {pid: {n.hand for n in self.configs if n.placement == pid} for pid in (START, GOAL)}
 
+    def handover_nodes(self) -> None:
+        """The single grasps the hand-over task needs, in its order (the hand nearer the
+        start picks, else the other), no more: a hand that reaches neither its end nor the
+        other costs a failed search each, the slowest part."""
+        guess = handover.picking_hand(self.scratch.problem, self.scratch)
+        for g in (guess, OTHER[guess]):
+            self.add_nodes([START], hands=(g,))
+            if any(n.hand == g and n.placement == START for n in self.configs):
+                self.add_nodes([GOAL], hands=(OTHER[g],))
+                if any(n.hand == OTHER[g] and n.placement == GOAL for n in self.configs):
+                    return
+
     def no_handover(self) -> str:
         """Why no hand can pick at the start and the other place at the goal, from the
         nodes found there (the hand-over task would search the same configurations
@@ -489,7 +501,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     for name in LEVELS[graph.style]:
         if name == "handover":
             t0 = time.perf_counter()
-            g.add_nodes([START, GOAL])  # both hands at both ends: the hand-over's single grasps
+            g.handover_nodes()
             nodes = {"nodes": time.perf_counter() - t0}
             if g.no_handover():
                 out = Outcome(TASK, stages=nodes, failure=PlanningFailed(Stage.GRASPS, g.no_handover()))
