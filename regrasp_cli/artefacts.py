@@ -209,3 +209,18 @@ def load_placements(cache_dir: Path, problem: Problem, build: bool, builder: Bui
 
     return _cached(pa.artefact_path(cache_dir, obj, options), pa.provenance(obj, options), build, make,
                    pa.read_placements, builder or QuietBuilder())
+
+
+def placements_for_style(style: str, cache_dir: Path, problem: Problem, build: bool,
+                         builder: Builder | None = None) -> tuple[list, str | None]:
+    """The placements a `plan --style` needs: none for ``one-arm``, ``handover`` and
+    ``seed000``; for ``auto``, none either when the object has no stable placement (the
+    plan says why it used none); for ``place-regrasp``, that is an InputError."""
+    if style not in ("auto", "place-regrasp"):
+        return [], None
+    try:
+        return load_placements(cache_dir, problem, build, builder)
+    except InputError as exc:
+        if style == "place-regrasp" or exc.field != "object.mesh":
+            raise  # placements the object does not have were asked for, or --no-build refused the file
+        return [], None

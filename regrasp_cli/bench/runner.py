@@ -221,8 +221,8 @@ def execute(item: RunItem) -> dict:
     """The run itself, in this process; raises whatever the planner raises."""
     from regrasp_cli.manip.context import OnlineOptions
     from regrasp_cli.manip.record import make_plan
-    from regrasp_cli.artefacts import load_placements
-    from regrasp_cli.manip.tasks import handover, manipulation
+    from regrasp_cli.artefacts import placements_for_style
+    from regrasp_cli.manip.tasks import manipulation
     from regrasp_cli.trajectory import write_plan
     from regrasp_cli.validate import validate_plan
 
@@ -236,13 +236,8 @@ def execute(item: RunItem) -> dict:
     t0 = time.perf_counter()
     graph = {}
     rm = roadmap if item.planner == REFERENCE else None
-    if item.style == "seed000":
-        outcome = handover.plan(problem, lists, rm, options, item.seed)
-    else:
-        stable = load_placements(Path(item.cache_dir), problem, False)[0] if item.style in ("auto", "place-regrasp") \
-            else []
-        outcome = manipulation.plan(problem, lists, rm, options, item.seed, stable,
-                                    manipulation.GraphOptions(style=item.style), keep=graph)
+    stable = placements_for_style(item.style, Path(item.cache_dir), problem, False)[0]
+    outcome = manipulation.plan_style(problem, lists, rm, options, item.seed, item.style, stable, keep=graph)
     t1 = time.perf_counter()
     plan = make_plan(problem, lists, outcome, options, item.seed, out_file, Path(item.cache_dir), hashes,
                      timings=True)

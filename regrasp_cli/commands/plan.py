@@ -14,7 +14,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from regrasp_cli.artefacts import load_artefacts, load_placements
+from regrasp_cli.artefacts import load_artefacts, placements_for_style
 from regrasp_cli.commands.report import CliBuilder
 from regrasp_cli.errors import EmptyGraspList, EmptyRoadmap, InputError
 from regrasp_cli.placement.supports import scene_supports
@@ -25,7 +25,6 @@ from regrasp_cli.manip.record import make_plan
 from regrasp_cli.manip.solve import Outcome
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.manip.tasks import handover, manipulation
-from regrasp_cli.manip.tasks.manipulation import GraphOptions
 from regrasp_cli.roadmap.build import RoadmapOptions
 from regrasp_cli.commands.progress import load_problem_shown
 from regrasp_cli.store import check_writable
@@ -80,13 +79,10 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     options = OnlineOptions(planner=planner, jobs=jobs)
     lists, art, hashes, stable = {}, None, {}, []
     failure = handover.ends_failure(problem, options)  # before building anything for them
-    if failure is None and style in ("auto", "place-regrasp"):  # milliseconds: before the grasp lists
-        try:
-            stable, hashes["placements"] = load_placements(cache_dir, problem, build, CliBuilder(console))
-        except InputError as exc:
-            if style == "place-regrasp" or exc.field != "object.mesh":
-                raise  # placements the object does not have were asked for, or --no-build refused the file
-            # auto: no intermediate placement, and the summary says why
+    if failure is None:  # milliseconds: before the grasp lists
+        stable, sha = placements_for_style(style, cache_dir, problem, build, CliBuilder(console))
+        if sha is not None:
+            hashes["placements"] = sha
     if failure is None:
         try:
             lists, art, more = load_artefacts(scene, cache_dir, problem, build, jobs, planner == "roadmap",
@@ -97,10 +93,8 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     roadmap = Roadmap.of(art) if art is not None else None
     if failure is not None:
         outcome = handover.failed(problem, failure)
-    elif style == "seed000":
-        outcome = handover.plan(problem, lists, roadmap, options, seed)
     else:
-        outcome = manipulation.plan(problem, lists, roadmap, options, seed, stable, GraphOptions(style=style))
+        outcome = manipulation.plan_style(problem, lists, roadmap, options, seed, style, stable)
     plan = make_plan(problem, lists, outcome, options, seed, out_file, cache_dir, hashes, timings)
     write_plan(out_file, plan)
     if outcome.failure is not None:

@@ -2,7 +2,11 @@
 Harada et al. 2014, §III-C, rely on; issue 16, first step).
 
 An object resting on a plane touches it with a face of its convex hull.  Each facet of the
-hull (coplanar hull triangles merged, as trimesh groups them) is a candidate; it is stable
+hull (adjacent hull triangles whose normals are within ``facet_angle`` of the facet's
+largest one merged: on an exact mesh its coplanar triangles, on a scan the slightly tilted
+triangles of a flat base) is a candidate, resting on the plane the hull supports along
+the facet's mean normal, the facet's vertices within ``flatness`` of that plane touching
+it; it is stable
 when the projection of the mass centre along the facet's normal falls inside the facet,
 at least ``margin`` from its edges, and the object must turn by at least
 ``min_tipping_angle`` about the nearest edge before it tips over: ``atan(d / h)``, d the
@@ -13,7 +17,8 @@ A cylinder's side is a band of thin hull facets, each with a tipping angle of a 
 degrees: it rolls.  Those are rejected by the angle, so a cylinder has its two caps only.
 For a mesh that is not watertight (a scan), the mass centre is the surface centroid (see
 :mod:`grasp.surface`) and the hull is that of the scanned points: placements are then as
-good as that approximation.
+good as that approximation.  A round object (a scanned apple) may have none: no facet is
+large enough to hold it by the margin and angle, and it is reported as rolling.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ from regrasp_cli.spatial import rotation_aligning
 class PlacementOptions:
     margin: float = 0.002  # m: the mass centre's projection at least this far inside the facet
     min_tipping_angle: float = 0.15  # rad: turn needed to tip over (below: it rolls)
+    facet_angle: float = 0.05  # rad: hull faces this close to a facet's first face's normal join it
+    flatness: float = 0.001  # m: hull vertices this close to the support plane touch it
 
 
 @dataclass(frozen=True)
@@ -47,14 +54,30 @@ class StablePlacement:
     footprint: np.ndarray  # (k, 2) the facet's outline in S's xy plane, counter-clockwise
 
 
-def _facets(hull: trimesh.Trimesh) -> list[np.ndarray]:
-    """Face indices of each planar facet of the hull: trimesh's coplanar groups, and every
-    triangle in none of them on its own."""
-    groups = [np.asarray(f) for f in hull.facets]
-    grouped = np.zeros(len(hull.faces), dtype=bool)
-    for f in groups:
-        grouped[f] = True
-    return groups + [np.array([i]) for i in np.flatnonzero(~grouped)]
+def _facets(hull: trimesh.Trimesh, angle: float) -> list[np.ndarray]:
+    """Face indices of each nearly planar facet of the hull: regions grown from the
+    largest face left over adjacent faces whose normals are within ``angle`` (rad) of the
+    region's first face.  With a small angle these are trimesh's coplanar facets on an exact
+    mesh; on a scan, the many slightly tilted triangles of a flat base join."""
+    normals, order = hull.face_normals, np.argsort(-hull.area_faces, kind="stable")
+    neighbours = [[] for _ in range(len(hull.faces))]
+    for a, b in hull.face_adjacency:
+        neighbours[a].append(b)
+        neighbours[b].append(a)
+    group = np.full(len(hull.faces), -1)
+    out, cos = [], np.cos(angle)
+    for seed in order:
+        if group[seed] >= 0:
+            continue
+        group[seed], todo, members = len(out), [seed], [seed]
+        while todo:
+            for b in neighbours[todo.pop()]:
+                if group[b] < 0 and normals[b] @ normals[seed] >= cos:
+                    group[b] = len(out)
+                    todo.append(b)
+                    members.append(b)
+        out.append(np.array(sorted(members)))
+    return out
 
 
 def stable_placements(mesh: trimesh.Trimesh, mass_centre: np.ndarray,
@@ -64,10 +87,14 @@ def stable_placements(mesh: trimesh.Trimesh, mass_centre: np.ndarray,
     hull = mesh.convex_hull
     c = np.asarray(mass_centre, dtype=float)
     out = []
-    for faces in _facets(hull):
-        n = hull.face_normals[faces[0]]
-        pts = hull.vertices[np.unique(hull.faces[faces])]
-        d = float(pts[0] @ n)
+    for faces in _facets(hull, options.facet_angle):
+        n = hull.area_faces[faces] @ hull.face_normals[faces]
+        n /= np.linalg.norm(n)
+        d = float((hull.vertices @ n).max())  # the support plane: nothing of the object below it
+        own = hull.vertices[np.unique(hull.faces[faces])]
+        pts = own[own @ n >= d - options.flatness]  # the facet's vertices on the plane
+        if len(pts) < 3:
+            continue
         h = d - float(n @ c)
         if h <= 0:
             continue  # the mass centre outside the hull (a bad mass centre): no rest on it

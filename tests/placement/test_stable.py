@@ -85,3 +85,17 @@ def test_the_mass_centre_decides():
     turned = box.copy()
     turned.vertices = box.vertices @ R.T
     assert len(stable_placements(turned, R @ c, PlacementOptions(margin=0.006, min_tipping_angle=0.0))) == 2
+
+
+def test_a_scanned_box_with_a_bumpy_surface_still_rests_on_its_six_faces():
+    """A box whose faces are many triangles, each vertex moved by 0.2 mm (a scan's noise):
+    no two hull triangles are coplanar, yet each face is one facet (facet_angle)."""
+    rng = np.random.default_rng(0)
+    box = trimesh.creation.box(extents=[0.06, 0.05, 0.04]).subdivide().subdivide()
+    box.vertices += rng.normal(0.0, 0.0002, box.vertices.shape)
+    hull = box.convex_hull
+    assert len(hull.facets) == 0 or max(len(f) for f in hull.facets) < 8  # trimesh sees no planar face
+    ps = stable_placements(box, box.center_mass)
+    assert len(ps) == 6
+    downs = np.round([p.normal_O for p in ps]).astype(int)
+    assert {tuple(d) for d in downs} == {(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)}

@@ -525,6 +525,15 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
                    failure=PlanningFailed(last.failure.stage, reason, last.failure.transition))
 
 
+def plan_style(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
+               seed: int, style: str, stable: list[StablePlacement] = (), keep: dict | None = None) -> Outcome:
+    """``regrasp plan --style``: ``seed000``, the hand-over task of Saut et al. 2010 alone;
+    any other, :func:`plan` in that style."""
+    if style == "seed000":
+        return handover.plan(problem, lists, roadmap, options, seed)
+    return plan(problem, lists, roadmap, options, seed, stable, GraphOptions(style=style), keep)
+
+
 def _graph_plan(g: _Graph, stable: list[StablePlacement], style) -> Outcome:
     """The manipulation graph's plan in one ``style`` (a :class:`graph.Style`), on the
     graph ``g`` (its nodes and blocked edges shared with the styles tried before)."""
