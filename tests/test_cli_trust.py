@@ -181,11 +181,11 @@ def test_a_negative_seed_is_one_line(tmp_path, args):
 
 def test_cache_dir_is_accepted_after_the_subcommand(built, tmp_path):
     """`plan S --cache-dir D` uses D: with only the self-collision pairs in it and
-    --no-build, the missing grasp list named is D's."""
+    --no-build, the missing artefact named (the placements, loaded first) is D's."""
     d = tmp_path / "elsewhere"
     shutil.copytree(built / "self_collision", d / "self_collision")
     result = run("plan", SCENE_YAML, "-o", tmp_path / "plan.json", *SMALL, "--no-build", "--cache-dir", d)
-    assert_one_error_line(result, str(d / "grasps"), "no such artefact")
+    assert_one_error_line(result, str(d / "placements"), "no such artefact")
 
 
 @pytest.mark.parametrize("text, said", [("1.0e9", "write 1.0e+9"), ("'0.5'", "without quotes")])
