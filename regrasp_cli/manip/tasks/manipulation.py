@@ -109,64 +109,56 @@ class _Graph:
         limits = dict(wanted=o.intermediate_nodes, attempts=o.intermediate_attempts, lean=False) if intermediate \
             else {}
         for pid in pids:
-            X = self.placements[pid]
             for hand in hands:
                 if (hand, pid) in self.searched:
                     continue
                 self.searched.add((hand, pid))
-                if not self._reachable(hand, X, pid):
+                if not self._reachable(hand, self.placements[pid], pid):
                     continue
-                before = self.scratch.checks
                 if pid in (START, GOAL):
                     # the hand-over task's own search of the hand at that end, which it reuses
                     rng = np.random.default_rng(handover.single_stream(self.seed, hand))
-                    found, stats = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand], X,
-                                                         self.env)
-                    self.singles[(hand, pid)] = (found, stats)
-                    self.counts["single_checks"] += self.scratch.checks - before
-                    self.configs.update({Node(hand, c.grasp, pid): c for c in found})
+                    self.singles[(hand, pid)] = self._search(hand, pid, rng)
                     continue
                 rng = np.random.default_rng([self.seed, 30, HANDS.index(hand), list(self.placements).index(pid)])
-                found = [c for n, c in self.configs.items() if n.hand == hand and n.placement == pid]
+                found = self._grasps_at(hand, pid)
                 # grasps reached at the start, then at the goal, first: transfers can join them
                 for end in (START, GOAL):
-                    known = np.array(sorted({n.grasp for n in self.configs if n.hand == hand and n.placement == end}),
-                                     dtype=int)
+                    known = np.setdiff1d(self._grasps_at(hand, end), found)
                     if len(known):
-                        more, _ = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand], X,
-                                                        self.env, np.setdiff1d(known, [c.grasp for c in found]),
-                                                        **limits)
-                        found += more
-                more, _ = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand], X, self.env,
-                                                np.setdiff1d(np.arange(len(self.lists[hand])),
-                                                             [c.grasp for c in found]), **limits)
-                self.counts["single_checks"] += self.scratch.checks - before
-                for c in found + more:
-                    self.configs[Node(hand, c.grasp, pid)] = c
+                        more, _ = self._search(hand, pid, rng, known, **limits)
+                        found = np.union1d(found, [c.grasp for c in more])
+                self._search(hand, pid, rng, np.setdiff1d(np.arange(len(self.lists[hand])), found), **limits)
+
+    def _search(self, hand: str, pid: str, rng: np.random.Generator, only: np.ndarray | None = None, **limits):
+        """:func:`doublegrasp.single_configurations` of the hand at placement ``pid`` (the
+        grasps ``only``), its configurations added as nodes; (configurations, stats)."""
+        before = self.scratch.checks
+        found, stats = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand],
+                                             self.placements[pid], self.env, only, **limits)
+        self.counts["single_checks"] += self.scratch.checks - before
+        self.configs.update({Node(hand, c.grasp, pid): c for c in found})
+        return found, stats
+
+    def _grasps_at(self, hand: str, pid: str) -> np.ndarray:
+        """The grasps (sorted indices) of the hand's nodes at placement ``pid``."""
+        return np.array(sorted({n.grasp for n in self.configs if n.hand == hand and n.placement == pid}), dtype=int)
 
     def one_arm_nodes(self) -> None:
         """The nodes a one-arm path can use, cheaply: each hand at the end nearer its
         shoulder (searched in full), then at the other end only with the grasps it has
         at the first (a transfer keeps the grasp), when it has any.  IK that fails is
         the slow part: a hand that cannot do both ends fails on a few grasps, not 80."""
-        task = self.scratch.problem.spec.task
         for hand in HANDS:
-            d = {pid: np.linalg.norm(X[:3, 3] - self.shoulder[hand])
-                 for pid, X in ((START, task.X_WO_start), (GOAL, task.X_WO_goal))}
+            d = {pid: np.linalg.norm(self.placements[pid][:3, 3] - self.shoulder[hand]) for pid in (START, GOAL)}
             first, second = sorted(d, key=d.get)
             self.add_nodes([first], hands=(hand,))
-            known = np.array(sorted({n.grasp for n in self.configs if n.hand == hand and n.placement == first}),
-                             dtype=int)
+            known = self._grasps_at(hand, first)
             if not len(known) or (hand, second) in self.searched or not self._reachable(
                     hand, self.placements[second], second):
                 continue
-            rng = np.random.default_rng([self.seed, 32, HANDS.index(hand)])
-            before = self.scratch.checks
-            found, _ = single_configurations(self.scratch, rng, self.lists[hand], self.shapes[hand],
-                                             self.placements[second], self.env, known, wanted=len(known))
-            self.counts["single_checks"] += self.scratch.checks - before
-            for c in found:
-                self.configs[Node(hand, c.grasp, second)] = c
+            self._search(hand, second, np.random.default_rng([self.seed, 32, HANDS.index(hand)]), known,
+                         wanted=len(known))
 
     def _reachable(self, hand: str, X_WO: np.ndarray, pid: str) -> bool:
         """Can the hand's grasp frame get to the grasp position nearest its shoulder at all
@@ -193,9 +185,9 @@ class _Graph:
         guess = handover.picking_hand(self.scratch.problem, self.scratch)
         for g in (guess, OTHER[guess]):
             self.add_nodes([START], hands=(g,))
-            if any(n.hand == g and n.placement == START for n in self.configs):
+            if len(self._grasps_at(g, START)):
                 self.add_nodes([GOAL], hands=(OTHER[g],))
-                if any(n.hand == OTHER[g] and n.placement == GOAL for n in self.configs):
+                if len(self._grasps_at(OTHER[g], GOAL)):
                     return
 
     def no_handover(self) -> str:
