@@ -65,6 +65,23 @@ def test_upside_down_in_a_tray_is_put_down_and_grasped_again(cache, tmp_path):
     assert validate_plan(out).valid
 
 
+def test_the_visibility_prm_puts_it_down_and_grasps_it_again_too(cache, tmp_path):
+    """The same scene with the paper's Visibility-PRM for intermediate placements: its
+    roadmap joins the start and the goal, and only its nodes join the graph."""
+    from regrasp_cli.validate import validate_plan
+
+    out = tmp_path / "plan.json"
+    result, plan = _plan(cache, SCENES / "hironx_upside_down.yaml", out, "--style", "place-regrasp",
+                         "--sampler", "vis-prm")
+    assert result.exit_code == 0, (result.output, result.exception)
+    c = plan["stats"]["counts"]
+    assert c["style"] == "place-regrasp" and c["regrasps"] >= 1 and c["placements"] >= 1
+    vis = c["vis_prm"][-1]
+    assert vis["joined"] and vis["connectors"] >= 1 and vis["samples"] <= 60
+    assert vis["nodes"] <= vis["configurations"]  # dropped samples are not in the graph
+    assert validate_plan(out).valid
+
+
 def test_the_regrasp_count_is_the_least_over_the_graph(cache):
     """The same run as above through the library: the exhaustive check, solving every
     edge a path with fewer regrasps would need, finds none."""

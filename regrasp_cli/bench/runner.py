@@ -65,6 +65,7 @@ class RunItem:
     iterations: int = DEFAULT_ITERATIONS  # RRT-Connect iterations per query (every planner)
     style: str = "auto"
     exhaustive: int = 0
+    sampler: str = "faces"
 
 
 def scene_labels(suite: Suite) -> dict[Path, str]:
@@ -89,7 +90,7 @@ def items_of(suite: Suite, cache_dir: Path, plan_dir: Path) -> list[RunItem]:
                 items.append(RunItem(labels[scene], str(scene), planner, seed, str(Path(cache_dir).resolve()),
                                      str((plan_dir / f"{name}.json").resolve()), suite.budget_s,
                                      suite.roadmap_nodes, suite.grasp_target, suite.iterations, suite.style,
-                                     suite.exhaustive))
+                                     suite.exhaustive, suite.sampler))
     return items
 
 
@@ -237,7 +238,8 @@ def execute(item: RunItem) -> dict:
     graph = {}
     rm = roadmap if item.planner == REFERENCE else None
     stable = placements_for_style(item.style, Path(item.cache_dir), problem, False)[0]
-    outcome = manipulation.plan_style(problem, lists, rm, options, item.seed, item.style, stable, keep=graph)
+    outcome = manipulation.plan_style(problem, lists, rm, options, item.seed, item.style, stable, keep=graph,
+                                          sampler=item.sampler)
     t1 = time.perf_counter()
     plan = make_plan(problem, lists, outcome, options, item.seed, out_file, Path(item.cache_dir), hashes,
                      timings=True)

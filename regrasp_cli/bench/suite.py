@@ -6,8 +6,8 @@ integers; default 20); ``budget_s`` (wall-clock seconds per run, default 60); op
 ``iterations`` (RRT-Connect iterations per query, default 3000: the budget of the
 single-query planners, ours and OMPL's, and of the roadmap planner's fallback, so that
 every planner gets the same), ``roadmap_nodes`` (default 50) and ``grasp_target``
-(default: the grasp builder's), ``style`` (as `regrasp plan --style`, default ``auto``)
-and ``exhaustive`` (default false: after each solved run, look for a path of fewer
+(default: the grasp builder's), ``style`` (as `regrasp plan --style`, default ``auto``),
+``sampler`` (as `regrasp plan --sampler`, default ``faces``) and ``exhaustive`` (default false: after each solved run, look for a path of fewer
 regrasps over the same manipulation graph, solving the motions of every edge it needs, up
 to ``exhaustive`` edges; the record says whether the plan's count is the minimum).
 Every error is an :class:`~regrasp_cli.errors.InputError` naming the file and field.
@@ -33,6 +33,7 @@ DEFAULT_SEEDS = 20
 DEFAULT_BUDGET_S = 60.0
 DEFAULT_ITERATIONS = 3000  # OnlineOptions().rrt.max_iterations
 STYLES = ("auto", "one-arm", "handover", "place-regrasp", "seed000")  # regrasp plan --style
+SAMPLERS = ("faces", "vis-prm")  # regrasp plan --sampler
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -49,6 +50,7 @@ class Suite:
     iterations: int = DEFAULT_ITERATIONS
     style: str = "auto"
     exhaustive: int = 0  # edges whose motions the exhaustive check may solve per run (0: no check)
+    sampler: str = "faces"
 
 
 def _planners(file: Path | None, field: str, names: list) -> tuple[str, ...]:
@@ -67,7 +69,7 @@ def load_suite(path: str | Path) -> Suite:
     file, data = read_yaml(path)
     f = Fields(file, data)
     f.only("format", "name", "scenes", "planners", "seeds", "budget_s", "iterations", "roadmap_nodes",
-           "grasp_target", "style", "exhaustive")
+           "grasp_target", "style", "exhaustive", "sampler")
     fmt = f.str("format")
     if fmt != SUITE_FORMAT:
         raise f.error("format", f"expected {SUITE_FORMAT!r}, found {fmt!r}")
@@ -94,8 +96,11 @@ def load_suite(path: str | Path) -> Suite:
     style = f.str("style", "auto")
     if style not in STYLES:
         raise f.error("style", f"expected one of {', '.join(STYLES)}, found {style!r}")
+    sampler = f.str("sampler", "faces")
+    if sampler not in SAMPLERS:
+        raise f.error("sampler", f"expected one of {', '.join(SAMPLERS)}, found {sampler!r}")
     return Suite(file, name, scene_paths, _planners(file, "planners", planners), seeds, float(budget), nodes, target,
-                 iterations, style, f.int("exhaustive", 0, minimum=0))
+                 iterations, style, f.int("exhaustive", 0, minimum=0), sampler)
 
 
 def seeds_of(file: Path | None, field: str, value) -> tuple[int, ...]:

@@ -62,7 +62,7 @@ def print_summary(plan: Plan, outcome: Outcome, console: Console) -> None:
 
 def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, planner: str, build: bool, jobs: int,
              timings: bool, check: bool, roadmap_nodes: int = RoadmapOptions.nodes, grasp_target: int | None = None,
-             console: Console | None = None, style: str = "auto") -> int:
+             console: Console | None = None, style: str = "auto", sampler: str = "faces") -> int:
     """The `plan` command; returns the exit code (0 solved, 1 not)."""
     from regrasp_cli.commands.validate import print_validation
     from regrasp_cli.validate import validate_plan
@@ -94,7 +94,7 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     if failure is not None:
         outcome = handover.failed(problem, failure)
     else:
-        outcome = manipulation.plan_style(problem, lists, roadmap, options, seed, style, stable)
+        outcome = manipulation.plan_style(problem, lists, roadmap, options, seed, style, stable, sampler=sampler)
     plan = make_plan(problem, lists, outcome, options, seed, out_file, cache_dir, hashes, timings)
     write_plan(out_file, plan)
     if outcome.failure is not None:

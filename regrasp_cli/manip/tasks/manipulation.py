@@ -11,8 +11,12 @@ Stages, each timed:
    at the start and at the goal tried first so that transfers can join them.  A hand whose
    grasp frame cannot get near the object (position-only IK) has no node there.
    Intermediate placements (:mod:`placement.supports`: stable placements fitted on the
-   scene's supports, one per resting face, where the hands that must use them rest) are
-   added only once every path without a regrasp has failed: they cannot give fewer.
+   scene's supports) are added only once every path without a regrasp has failed: they
+   cannot give fewer.  ``sampler`` "faces": one per resting face, where the hands that
+   must use them rest, with a few grasps each; "vis-prm": the Visibility-PRM over
+   CG_r∩CP and CG_l∩CP with Type-1 steering (§IV-B-2, :mod:`manip.visprm`), its guards,
+   connectors and the corners of their Type-2 paths; a second one when every path
+   through the first failed.
 2. ``search`` and ``motions`` (§IV-C), in turn: the path of fewest regrasps and then least
    joint-space length among the edges not found infeasible; its edges' motions are solved
    (transit and transfer queries by the planner's path solver; a hand-over edge first
@@ -30,6 +34,7 @@ expands to (:func:`graph.type2`), so the search returns realizable paths directl
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, field, replace
 
@@ -37,22 +42,23 @@ import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions, Scratch
-from regrasp_cli.manip.doublegrasp import DoubleGrasp, single_configurations
+from regrasp_cli.manip.doublegrasp import DoubleGrasp, cheap_order, environment_free, single_configurations
 from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, search, \
     style_of, successors
-from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, SingleConfig, shoulder
+from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, SingleConfig, shoulder, single_configuration
 from regrasp_cli.manip.modes import Kind, Mode, Transition
 from regrasp_cli.manip.queries import Roadmap
 from regrasp_cli.manip.solve import Outcome, Query, Step, TransitionStats, check_ends, solve_queries, time_steps
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.manip.tasks import handover
+from regrasp_cli.manip.visprm import VisOptions, visibility_roadmap
 from regrasp_cli.manip.tasks.handover import blend_check, exchange_near, exchange_pose, grasp_id, object_shape, \
     phase_worlds, tick
 from regrasp_cli.model.handshape import hand_shapes, hands_collide, static_geometry
 from regrasp_cli.model.ik import IKOptions, solve_position
 from regrasp_cli.motion.local import joint_reach, joint_weights
 from regrasp_cli.placement.stable import StablePlacement
-from regrasp_cli.placement.supports import FitOptions, fit_placements, scene_supports
+from regrasp_cli.placement.supports import FitOptions, Fitted, fit_placements, scene_supports
 from regrasp_cli.scene import Problem
 from regrasp_cli.spatial import inverse
 
@@ -69,6 +75,10 @@ class GraphOptions:
     reach_factor: float = 1.0  # a hand has no node where the object is farther than this x its arm's reach
     intermediate_nodes: int = 4  # configurations per hand at an intermediate placement ...
     intermediate_attempts: int = 12  # ... from this many grasps at most, the arm alone (IK that fails is slow)
+    sampler: str = "faces"  # intermediate placements: "faces" (one per resting face) or "vis-prm" (§IV-B-2)
+    vis: VisOptions = field(default_factory=VisOptions)
+    vis_pool: int = 200  # fits nearest a hand's rest its Visibility-PRM samples from
+    vis_rounds: int = 2  # Visibility-PRMs at most, each when every path through the last ones failed
     fit: FitOptions = field(default_factory=FitOptions)
 
 
@@ -98,6 +108,8 @@ class _Graph:
         self.shoulder = {h: shoulder(scratch, h, p.robot.q_rest) for h in HANDS}
         self.rest = {h: scratch.kin.fk(p.robot.q_rest, p.robot.hands[h].grasp_frame)[:3, 3] for h in HANDS}
         self.weights = joint_weights(p.robot)
+        self.rounds = 0  # intermediate placements added so many times
+        self.names = itertools.count(1)  # of the Visibility-PRMs' placements: p1, p2...
 
     # ---------------------------------------------------------------- nodes
 
@@ -173,6 +185,93 @@ class _Graph:
         rng = np.random.default_rng([self.seed, 31, HANDS.index(hand), list(self.placements).index(pid)])
         return solve_position(robot, robot.hands[hand].grasp_frame, nearest, robot.q_rest, idx, rng,
                               IKOptions(restarts=8)).success
+
+    def add_intermediate(self, stable: list[StablePlacement]) -> None:
+        """Intermediate placements and their nodes, by ``options.sampler``: one fit per
+        resting face with a few grasps each (:func:`intermediate_placements`), or the
+        Visibility-PRM's guards, connectors and corners (:meth:`visibility_nodes`)."""
+        spec, o = self.scratch.problem.spec, self.options
+        fitted = fit_placements(stable, scene_supports(spec.obstacles, spec.supports, spec.file),
+                                self.scratch.problem.object.mesh, spec.obstacles, o.fit)
+        self.rounds += 1
+        if o.sampler == "vis-prm":
+            self.visibility_nodes(fitted)
+        else:
+            extra = intermediate_placements(fitted, len(stable), o, self.rest, self.shoulder, self.reach, self.ends())
+            self.placements.update(extra)
+            self.add_nodes(list(extra), intermediate=True)
+        self.counts["intermediate_placements"] = len(set(self.placements) - {START, GOAL})
+
+    def visibility_nodes(self, fitted: Fitted) -> None:
+        """The Visibility-PRM of :mod:`manip.visprm` over CG_r∩CP and CG_l∩CP (§IV-B-2).
+        A sample is a hand, a placement and a grasp.  The placement: half the time one
+        sampled before (where the other hand may take over), else one of the ``vis_pool``
+        fits on the supports nearest (horizontally) to where the hand rests, within its
+        reach.  The grasp: half the time one the hand has at the start or the goal (a
+        transfer joins it), else one of the ``intermediate_attempts`` grasps that clear the
+        obstacles there with the best cheap score.  Uniform samples would mostly be poses
+        a 6-DoF arm cannot take; this bias keeps the IK that fails, the slow part, rare.
+        Only the roadmap's nodes join the graph, and only their placements."""
+        o = self.options
+        rng = np.random.default_rng([self.seed, 33, self.rounds])
+        p = fitted.X_WO[:, :3, 3]
+        pool = {}
+        for h in HANDS:
+            within = np.flatnonzero(np.linalg.norm(p - self.shoulder[h], axis=1) <= self.reach[h])
+            near = np.linalg.norm(p[within, :2] - self.rest[h][:2], axis=1)
+            pool[h] = within[np.argsort(near, kind="stable")[:o.vis_pool]]
+        ends = {h for h in HANDS for pid in (START, GOAL) if len(self._grasps_at(h, pid))}
+        hands = [h for h in HANDS if h in ends and len(pool[h])]  # a hand at neither end joins nothing
+        found: dict[Node, SingleConfig | None] = dict(self.configs)
+        pid_of: dict[int, str] = {}  # fit index -> its placement id, once sampled
+        order: dict[tuple[str, str], np.ndarray] = {}  # (hand, placement) -> free grasps, best first
+
+        def grasps(h: str, pid: str) -> np.ndarray:
+            if (h, pid) not in order:
+                X_WO = self.placements[pid]
+                free = environment_free(self.lists[h], self.shapes[h], X_WO, self.env)
+                order[(h, pid)] = cheap_order(self.scratch, self.lists[h], free, X_WO)
+            return order[(h, pid)]
+
+        def sample() -> Node:
+            h = hands[rng.integers(len(hands))]
+            mine = [pid_of[i] for i in pool[h] if i in pid_of]
+            if mine and rng.random() < 0.5:
+                pid = mine[rng.integers(len(mine))]
+            else:
+                i = int(pool[h][rng.integers(len(pool[h]))])
+                if i not in pid_of:
+                    pid_of[i] = f"p{next(self.names)}"
+                pid = pid_of[i]
+                self.placements[pid] = fitted.X_WO[i]
+            free = grasps(h, pid)
+            known = np.intersect1d(np.union1d(self._grasps_at(h, START), self._grasps_at(h, GOAL)), free)
+            best = free[:o.intermediate_attempts]
+            if len(known) and (rng.random() < 0.5 or not len(best)):
+                return Node(h, int(rng.choice(known)), pid)
+            return Node(h, int(best[rng.integers(len(best))]) if len(best) else -1, pid)
+
+        def valid(n: Node) -> bool:
+            if n not in found:
+                found[n] = None
+                if n.grasp in grasps(n.hand, n.placement):
+                    before = self.scratch.checks
+                    X_WO, end = self.placements[n.placement], n.placement in (START, GOAL)
+                    stream = np.random.default_rng([self.seed, 34, self.rounds, len(found)])
+                    for lean in (False, True)[:1 + end]:  # the torso helps at the ends only, as there
+                        found[n] = found[n] or single_configuration(self.scratch, stream, self.lists[n.hand],
+                                                                    n.grasp, X_WO, lean)
+                    self.counts["single_checks"] += self.scratch.checks - before
+            return found[n] is not None
+
+        at = {pid: [n for n in sorted(self.configs) if n.placement == pid] for pid in (START, GOAL)}
+        roadmap = visibility_roadmap(at[START], at[GOAL], sample, valid, o.vis) if hands else None
+        kept = roadmap.nodes if roadmap is not None else set()
+        self.configs.update({n: found[n] for n in kept})
+        for pid in set(pid_of.values()) - {n.placement for n in kept}:
+            del self.placements[pid]
+        self.counts.setdefault("vis_prm", []).append(dict(roadmap.counts() if roadmap else {},
+                                                          configurations=len(found)))
 
     def ends(self) -> dict[str, set[str]]:
         """The hands with nodes at the start and at the goal."""
@@ -296,18 +395,15 @@ def _label(e: Edge) -> str:
     return f"{e.kind.value} {n(e.a)} -> {n(e.b)}"
 
 
-def intermediate_placements(problem: Problem, stable: list[StablePlacement], options: GraphOptions,
-                            hands_at: dict[str, np.ndarray], shoulders: dict[str, np.ndarray],
-                            reach: dict[str, float], ends: dict[str, set[str]]) -> dict[str, np.ndarray]:
-    """``p1``, ``p2``...: per resting face (most stable first), one fit on the scene's
-    supports, ``intermediate`` at most, where the hands that must use it work most easily:
+def intermediate_placements(fitted: Fitted, faces: int, options: GraphOptions, hands_at: dict[str, np.ndarray],
+                            shoulders: dict[str, np.ndarray], reach: dict[str, float],
+                            ends: dict[str, set[str]]) -> dict[str, np.ndarray]:
+    """``p1``, ``p2``...: per resting face (``faces``, most stable first), one of the
+    ``fitted`` placements on the scene's supports, ``intermediate`` at most, where the hands that must use it work most easily:
     nearest (horizontally) to where the hand rests (``hands_at``: its grasp frame at the
     rest configuration), for a hand with nodes at both the start and the goal (``ends``:
     the hands with nodes at each); else the fit whose farther distance to the rests of a
     hand of each end is least.  Within every such hand's reach (``shoulders``, ``reach``)."""
-    spec = problem.spec
-    fitted = fit_placements(stable, scene_supports(spec.obstacles, spec.supports, spec.file), problem.object.mesh,
-                            spec.obstacles, options.fit)
     if not len(fitted):
         return {}
     p = fitted.X_WO[:, :3, 3]
@@ -317,7 +413,7 @@ def intermediate_placements(problem: Problem, stable: list[StablePlacement], opt
     pairs = [(h, h) for h in both] or [(a, b) for a in ends[START] for b in ends[GOAL]] or [("right", "left")]
     score = np.min([np.where(within[a] & within[b], np.maximum(near[a], near[b]), np.inf) for a, b in pairs], axis=0)
     out = {}
-    for face in range(len(stable)):
+    for face in range(faces):
         idx = np.flatnonzero((fitted.stable == face) & np.isfinite(score))
         if len(idx):
             out[f"p{len(out) + 1}"] = fitted.X_WO[idx[np.argmin(score[idx])]]
@@ -377,7 +473,7 @@ def steps_of(g: _Graph, path: list[Edge], labels: list[str]) -> list[Step]:
     return steps
 
 
-def _search_and_solve(g: _Graph, style, clock: dict, stable: list[StablePlacement], problem: Problem):
+def _search_and_solve(g: _Graph, style, clock: dict, stable: list[StablePlacement]):
     """The first path whose motions all succeed, with its labels; raises PlanningFailed."""
     o = g.options
     t0 = time.perf_counter()
@@ -386,21 +482,19 @@ def _search_and_solve(g: _Graph, style, clock: dict, stable: list[StablePlacemen
     else:
         g.one_arm_nodes()
     t0 = tick(clock, "nodes", t0)
-    more = style.placements and bool(stable) and not (set(g.placements) - {START, GOAL})
+    rounds = (o.vis_rounds if o.sampler == "vis-prm" else 1) if style.placements and stable and \
+        not g.rounds else 0
     out = successors(g.configs, style, g.compatible)
     last = None
     for attempt in range(o.graph_attempts):
         path = search(out, g.length, g.blocked)
-        if more and (path is None or sum(e.kind.regrasps for e in path) >= 1):
-            # every path without a regrasp failed: intermediate placements may help now
+        # every path without a regrasp failed: intermediate placements may help now; more
+        # (another Visibility-PRM) when every path through them failed too
+        while g.rounds < rounds and (path is None or (not g.rounds and sum(e.kind.regrasps for e in path))):
             t0 = tick(clock, "search", t0)
-            extra = intermediate_placements(problem, stable, o, g.rest, g.shoulder, g.reach, g.ends())
-            g.placements.update(extra)
-            g.counts["intermediate_placements"] = len(extra)
-            g.add_nodes(list(extra), intermediate=True)
+            g.add_intermediate(stable)
             t0 = tick(clock, "nodes", t0)
             out = successors(g.configs, style, g.compatible)
-            more = False
             path = search(out, g.length, g.blocked)
         t0 = tick(clock, "search", t0)
         if path is None:
@@ -518,12 +612,14 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
 
 
 def plan_style(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
-               seed: int, style: str, stable: list[StablePlacement] = (), keep: dict | None = None) -> Outcome:
-    """``regrasp plan --style``: ``seed000``, the hand-over task of Saut et al. 2010 alone;
-    any other, :func:`plan` in that style."""
+               seed: int, style: str, stable: list[StablePlacement] = (), keep: dict | None = None,
+               sampler: str = GraphOptions.sampler) -> Outcome:
+    """``regrasp plan --style --sampler``: ``seed000``, the hand-over task of Saut et al.
+    2010 alone; any other, :func:`plan` in that style, its intermediate placements from
+    ``sampler`` (``faces`` or ``vis-prm``, :class:`GraphOptions`)."""
     if style == "seed000":
         return handover.plan(problem, lists, roadmap, options, seed)
-    return plan(problem, lists, roadmap, options, seed, stable, GraphOptions(style=style), keep)
+    return plan(problem, lists, roadmap, options, seed, stable, GraphOptions(style=style, sampler=sampler), keep)
 
 
 def _graph_plan(g: _Graph, stable: list[StablePlacement], style) -> Outcome:
@@ -534,7 +630,7 @@ def _graph_plan(g: _Graph, stable: list[StablePlacement], style) -> Outcome:
     clock = dict.fromkeys(STAGES, 0.0)
     before = scratch.checks
     try:
-        path, labels = _search_and_solve(g, style, clock, list(stable), problem)
+        path, labels = _search_and_solve(g, style, clock, list(stable))
         t0 = time.perf_counter()
         steps = steps_of(g, path, labels)
         queries = [q for e, label in zip(path, labels) for q in g._queries(e, label)]
@@ -566,10 +662,8 @@ def fewer_regrasps(g: _Graph, stable: list[StablePlacement], regrasps: int, budg
     known to fail, and again, until a path's edges all succeed or none is left."""
     if regrasps == 0:
         return False, 0
-    if regrasps >= 2 and stable and not set(g.placements) - {START, GOAL}:
-        extra = intermediate_placements(g.scratch.problem, stable, g.options, g.rest, g.shoulder, g.reach, g.ends())
-        g.placements.update(extra)
-        g.add_nodes(list(extra), intermediate=True)
+    if stable and not g.rounds:  # a transfer through a placement may need no regrasp
+        g.add_intermediate(stable)
     out = successors(g.configs, STYLES["auto"], g.compatible)
     solved = 0
     while True:
