@@ -1,0 +1,45 @@
+"""Fingertip contacts and the stability of a grasp in GS_n (seed 003 §IV).
+
+Contacts are points with Coulomb friction (§IV, eqs. 1-2): a fingertip pushes along the
+inward normal with a tangential part of at most ``mu`` times the normal one.  A grasp is
+stable, quasi-statically, when it is force closure (§IV): the test and its Ferrari-Canny
+epsilon are :func:`grasp.quality.force_closure` over linearised friction cones.
+
+For finger gaiting the paper asks more of a configuration of GS_n: *every* grasp of n-1
+of its fingers must be force closure too, so that any finger may let go and move to a
+new contact while the others hold the object (§IV, last paragraph; this is what makes a
+path in GS_n reducible to regrasping and transfer paths).  :func:`gaitable` tests it.
+
+Frames: points, normals and the centre in one frame (the object's, normally); normals
+outward; metres.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
+
+
+def closure(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: float) -> float:
+    """Ferrari-Canny epsilon of point contacts with friction at ``p`` (k, 3) with outward
+    normals ``n`` (k, 3), torques about ``centre`` (3,) divided by ``rho`` (m, the object's
+    radius); 0.0 when the grasp is not force closure."""
+    if len(p) < 2:
+        return 0.0
+    return force_closure(primitive_wrenches(p, n, mu, centre, rho))[1]
+
+
+def gaitable(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: float) -> float:
+    """The least epsilon over the grasps that leave one finger out (each finger may be
+    lifted for a regrasp), 0.0 when one of them is not force closure; the whole grasp is
+    force closure then as well (a superset of contacts)."""
+    worst = np.inf
+    for keep in itertools.combinations(range(len(p)), len(p) - 1):
+        eps = closure(p[list(keep)], n[list(keep)], mu, centre, rho)
+        if eps <= 0.0:
+            return 0.0
+        worst = min(worst, eps)
+    return float(worst) if np.isfinite(worst) else 0.0

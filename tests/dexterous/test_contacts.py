@@ -1,0 +1,59 @@
+"""Force closure of fingertip contacts on a sphere, known on paper (seed 003 §IV): three
+contacts 120° apart on the equator hold the sphere with any friction and not without;
+three on a circle of colatitude θ need mu > cot θ (friction must carry the inward pull
+along the axis); four at a regular tetrahedron's vertices hold it with friction, never
+without (on a sphere every normal passes through the centre: no torque); and for finger
+gaiting every three of the four must hold it too."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from regrasp_cli.dexterous.contacts import closure, gaitable
+
+R = 0.03
+O = np.zeros(3)
+
+
+def _ring(colatitude: float, k: int = 3, phase: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    phi = phase + 2 * np.pi * np.arange(k) / k
+    n = np.stack([np.sin(colatitude) * np.cos(phi), np.sin(colatitude) * np.sin(phi),
+                  np.full(k, np.cos(colatitude))], axis=1)
+    return R * n, n
+
+
+def _tetrahedron() -> tuple[np.ndarray, np.ndarray]:
+    n = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float) / math.sqrt(3)
+    return R * n, n
+
+
+@pytest.mark.parametrize("mu", [0.1, 0.5, 1.0])
+def test_three_contacts_on_the_equator_hold_with_any_friction(mu):
+    p, n = _ring(np.pi / 2)
+    assert closure(p, n, mu, O, R) > 0
+
+
+def test_no_contacts_on_a_sphere_hold_it_without_friction():
+    for p, n in (_ring(np.pi / 2), _tetrahedron(), _ring(np.pi / 3, 6)):
+        assert closure(p, n, 0.0, O, R) == 0.0
+
+
+@pytest.mark.parametrize("mu, holds", [(0.4, False), (0.5, False), (0.8, True), (1.2, True)])
+def test_three_contacts_on_one_side_need_friction_above_cot_colatitude(mu, holds):
+    p, n = _ring(np.pi / 3)  # cot 60° = 0.577
+    assert (closure(p, n, mu, O, R) > 0) == holds
+
+
+def test_two_contacts_never_hold_and_one_lifted_finger_is_checked():
+    p, n = _ring(np.pi / 2, 2)
+    assert closure(p, n, 1.0, O, R) == 0.0  # antipodal points: free to spin about their axis
+    p, n = _tetrahedron()
+    eps4, eps3 = closure(p, n, 0.8, O, R), gaitable(p, n, 0.8, O, R)
+    assert eps4 > 0 and 0 < eps3 <= eps4  # any three hold it, less well than four
+    # the tetrahedron's three lower contacts are 109.5° from the top one: cot(109.5°) < 0,
+    # but without the top contact they sit on one side (colatitude 70.5° about -z) and need
+    # mu > cot 70.5° = 0.354; with mu = 0.3 four hold it and one lifted finger drops it
+    assert closure(p, n, 0.3, O, R) > 0 and gaitable(p, n, 0.3, O, R) == 0.0
