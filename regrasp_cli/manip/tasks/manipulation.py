@@ -173,18 +173,22 @@ class _Graph:
                          wanted=len(known))
 
     def _reachable(self, hand: str, X_WO: np.ndarray, pid: str) -> bool:
-        """Can the hand's grasp frame get to the grasp position nearest its shoulder at all
-        (arm and torso, position only)?  When not, its grasps there are not searched: IK
-        that fails is the slowest part of the nodes."""
-        if np.linalg.norm(X_WO[:3, 3] - self.shoulder[hand]) > self.reach[hand]:
-            return False
+        """Can the hand's grasp frame get to one of the grasp positions at all (arm and
+        torso, position only): the nearest its shoulder, the median, the farthest?  When
+        not, its grasps there are not searched: IK that fails is the slowest part of the
+        nodes.  (The nearest alone is not enough: it may be too close for the arm to fold
+        to, when others are within reach.)  Without a torso, the object's distance to the
+        shoulder at rest against the arm's reach decides first."""
         robot = self.scratch.problem.robot
+        if not len(robot.groups["torso"]) and np.linalg.norm(X_WO[:3, 3] - self.shoulder[hand]) > self.reach[hand]:
+            return False  # (a torso, HiroNX's waist, moves the shoulder: IK says)
         p = X_WO[:3, :3] @ self.lists[hand].X_OG[:, :3, 3].T + X_WO[:3, 3:4]  # (3, n) grasp positions
-        nearest = p[:, np.argmin(np.linalg.norm(p.T - self.shoulder[hand], axis=1))]
+        order = np.argsort(np.linalg.norm(p.T - self.shoulder[hand], axis=1), kind="stable")
         idx = np.concatenate([robot.groups["torso"], robot.hands[hand].arm_idx])
         rng = np.random.default_rng([self.seed, 31, HANDS.index(hand), list(self.placements).index(pid)])
-        return solve_position(robot, robot.hands[hand].grasp_frame, nearest, robot.q_rest, idx, rng,
-                              IKOptions(restarts=8)).success
+        return any(solve_position(robot, robot.hands[hand].grasp_frame, p[:, k], robot.q_rest, idx, rng,
+                                  IKOptions(restarts=8)).success
+                   for k in dict.fromkeys(order[[0, len(order) // 2, -1]]))
 
     def add_intermediate(self, stable: list[StablePlacement]) -> None:
         """Intermediate placements and their nodes, by ``options.sampler``: one fit per
@@ -482,8 +486,7 @@ def _search_and_solve(g: _Graph, style, clock: dict, stable: list[StablePlacemen
     else:
         g.one_arm_nodes()
     t0 = tick(clock, "nodes", t0)
-    rounds = (o.vis_rounds if o.sampler == "vis-prm" else 1) if style.placements and stable and \
-        not g.rounds else 0
+    rounds = (o.vis_rounds if o.sampler == "vis-prm" else 1) if style.placements and stable else 0
     out = successors(g.configs, style, g.compatible)
     last = None
     for attempt in range(o.graph_attempts):
