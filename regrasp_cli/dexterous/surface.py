@@ -14,6 +14,7 @@ Frames: the mesh's (the object's); metres.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import potpourri3d as pp3d
@@ -54,10 +55,13 @@ class Surface:
         uv[flip] = 1 - uv[flip]
         return tri, uv
 
+    @cached_property
+    def _mesh(self) -> trimesh.Trimesh:
+        return trimesh.Trimesh(self.V, self.F, process=False)
+
     def locate(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The contacts nearest the points ``p`` (n, 3): (tri (n,), uv (n, 2))."""
-        mesh = trimesh.Trimesh(self.V, self.F, process=False)
-        _, _, tri = trimesh.proximity.closest_point(mesh, p)
+        _, _, tri = trimesh.proximity.closest_point(self._mesh, p)
         bary = trimesh.triangles.points_to_barycentric(self.V[self.F[tri]], p)
         return tri, bary[:, 1:]
 

@@ -1,0 +1,104 @@
+"""GS_n on our humanoid's right hand holding a sphere (seed 003 §IV-§VI): sampled
+configurations have every fingertip on its contact, on the surface, with force closure;
+the thumb, which opposes three fingers on one side, can seldom let go (without it the
+others push from one side only), the other fingers can; a path in GS_n keeps, at every
+step, the fingertips on contacts that lie on the surface, force closure, and force
+closure without each finger whose contact moves; and a path that would move the thumb's
+contact is refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from regrasp_cli.dexterous.gsn import GsScratch, gs_path, sample_config
+from regrasp_cli.dexterous.hand import tip_targets
+from regrasp_cli.dexterous.surface import Surface
+from regrasp_cli.grasp.frames import grasp_frames
+from regrasp_cli.grasp.single import HandModel
+from regrasp_cli.grasp.surface import build_surface, sampling_step
+from regrasp_cli.grasp.workspace import hand_workspace
+from regrasp_cli.model.robot import Kinematics
+from regrasp_cli.model.selfcollision import disabled_pairs
+from regrasp_cli.spatial import inverse
+
+R = 0.035
+THUMB = 0
+
+
+@pytest.fixture(scope="module")
+def gs(robot, cache_dir):
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=R)
+    hm = HandModel(robot, "right", mesh, disabled_pairs(robot, cache_dir).links(), 0.002)
+    ws = hand_workspace(robot, "right", cache_dir=cache_dir)
+    hm.voxels(ws)
+    sampled = build_surface(mesh, sampling_step(0.01), np.random.default_rng(0))
+    s = GsScratch(hm, ws, sampled, Surface.of(mesh), R)
+    configs = [c for X_OG in grasp_frames(mesh.bounds, 4, 256)[::4]
+               if (c := sample_config(s, inverse(X_OG))) is not None]
+    return s, mesh, configs
+
+
+def _check(s, mesh, kin, c):
+    tips = s.hand.tips(kin, c.q)
+    assert np.abs(tips - tip_targets(s.X_WG @ c.X_GO, c.p, c.n, s.hand.radii)).max() < 3e-4
+    assert np.abs(trimesh.proximity.signed_distance(mesh, c.p)).max() < 1e-9  # on the surface
+    assert c.eps > 0 and s.closure(c.p, c.n) == pytest.approx(c.eps)
+
+
+def test_sampled_configurations_are_in_gs_n_and_the_thumb_seldom_lets_go(gs, robot):
+    s, mesh, configs = gs
+    assert len(configs) >= 20
+    kin = Kinematics(robot)
+    thumb, others = 0, 0
+    for c in configs:
+        _check(s, mesh, kin, c)
+        liftable = s.liftable(c)
+        thumb += THUMB in liftable
+        others += bool(set(liftable) - {THUMB})
+    # without the thumb the three fingers push from one side: they hold the sphere only
+    # when they wrap far around it (2 of 392 samples on a denser grid)
+    assert thumb <= 0.1 * len(configs) and others >= 0.9 * len(configs)
+
+
+def test_a_path_in_gs_n_keeps_contacts_and_closure_at_every_step(gs, robot):
+    s, mesh, configs = gs
+    kin = Kinematics(robot)
+    found = 0
+    for i, c in enumerate(configs):
+        moving = s.liftable(c)
+        if not moving:
+            continue
+        X = c.X_GO.copy()
+        X[:3, :3] = Rotation.from_rotvec([0.0, 0.0, 0.1]).as_matrix() @ X[:3, :3]
+        # the moving fingers slide to where the same turn carries the other contacts
+        b_p = c.p.copy()
+        turned = (inverse(X) @ c.X_GO)[:3, :3]
+        b_p[list(moving)] = s.sampled.points[s.sampled.tree.query(c.p[list(moving)] @ turned.T)[1]]
+        fixed = tuple(f for f in range(len(c.p)) if f not in moving)
+        path = gs_path(s, c, X, b_p, np.random.default_rng(i), fixed)
+        if path is None:
+            continue
+        found += 1
+        assert np.allclose(path[-1].X_GO, X)
+        q_prev = c.q
+        for step in path:
+            _check(s, mesh, kin, step)
+            assert np.allclose(step.p[list(fixed)], c.p[list(fixed)])
+            assert all(s.closure(step.p, step.n, f) > 0 for f in moving if not np.allclose(b_p[f], c.p[f]))
+            assert np.abs(step.q - q_prev).max() <= s.options.max_joint_step
+            q_prev = step.q
+    assert found >= 1
+
+
+def test_a_path_that_moves_the_thumb_is_refused(gs):
+    s, mesh, configs = gs
+    c = next(c for c in configs if THUMB not in s.liftable(c))
+    b_p = c.p.copy()
+    side = np.cross(c.p[THUMB], [0.0, 0.0, 1.0])
+    turn = Rotation.from_rotvec(0.3 * side / np.linalg.norm(side)).as_matrix()
+    b_p[THUMB] = s.sampled.points[s.sampled.tree.query(turn @ c.p[THUMB])[1]]
+    assert np.linalg.norm(b_p[THUMB] - c.p[THUMB]) > 0.005
+    assert gs_path(s, c, c.X_GO, b_p, np.random.default_rng(0)) is None
