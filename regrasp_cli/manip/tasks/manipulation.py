@@ -106,6 +106,7 @@ class _Graph:
         reach = joint_reach(p.robot)
         self.reach = {h: options.reach_factor * reach[p.robot.hands[h].arm_idx[0]] for h in HANDS}
         self.shoulder = {h: shoulder(scratch, h, p.robot.q_rest) for h in HANDS}
+        self.shoulders = {h: shoulder_positions(scratch, h) for h in HANDS}
         self.rest = {h: scratch.kin.fk(p.robot.q_rest, p.robot.hands[h].grasp_frame)[:3, 3] for h in HANDS}
         self.weights = joint_weights(p.robot)
         self.rounds = 0  # intermediate placements added so many times
@@ -173,22 +174,20 @@ class _Graph:
                          wanted=len(known))
 
     def _reachable(self, hand: str, X_WO: np.ndarray, pid: str) -> bool:
-        """Can the hand's grasp frame get to one of the grasp positions at all (arm and
-        torso, position only): the nearest its shoulder, the median, the farthest?  When
-        not, its grasps there are not searched: IK that fails is the slowest part of the
-        nodes.  (The nearest alone is not enough: it may be too close for the arm to fold
-        to, when others are within reach.)  Without a torso, the object's distance to the
-        shoulder at rest against the arm's reach decides first."""
+        """Can the hand's grasp frame get to the grasp position nearest its shoulder at all
+        (arm and torso, position only)?  When not, its grasps there are not searched: IK
+        that fails is the slowest part of the nodes.  First, the object must be within the
+        arm's reach of a shoulder position the torso allows (HiroNX's waist swings the
+        shoulder round: from the shoulder at rest, goals it turns to looked out of reach)."""
+        if np.linalg.norm(self.shoulders[hand] - X_WO[:3, 3], axis=1).min() > self.reach[hand]:
+            return False
         robot = self.scratch.problem.robot
-        if not len(robot.groups["torso"]) and np.linalg.norm(X_WO[:3, 3] - self.shoulder[hand]) > self.reach[hand]:
-            return False  # (a torso, HiroNX's waist, moves the shoulder: IK says)
         p = X_WO[:3, :3] @ self.lists[hand].X_OG[:, :3, 3].T + X_WO[:3, 3:4]  # (3, n) grasp positions
-        order = np.argsort(np.linalg.norm(p.T - self.shoulder[hand], axis=1), kind="stable")
+        nearest = p[:, np.argmin(np.linalg.norm(p.T - self.shoulder[hand], axis=1))]
         idx = np.concatenate([robot.groups["torso"], robot.hands[hand].arm_idx])
         rng = np.random.default_rng([self.seed, 31, HANDS.index(hand), list(self.placements).index(pid)])
-        return any(solve_position(robot, robot.hands[hand].grasp_frame, p[:, k], robot.q_rest, idx, rng,
-                                  IKOptions(restarts=8)).success
-                   for k in dict.fromkeys(order[[0, len(order) // 2, -1]]))
+        return solve_position(robot, robot.hands[hand].grasp_frame, nearest, robot.q_rest, idx, rng,
+                              IKOptions(restarts=8)).success
 
     def add_intermediate(self, stable: list[StablePlacement]) -> None:
         """Intermediate placements and their nodes, by ``options.sampler``: one fit per
@@ -390,6 +389,18 @@ class _Graph:
                 self.blocked.add(e)
                 self.why[e] = results[bad[0].label].error
         return failed
+
+
+def shoulder_positions(scratch: Scratch, hand: str, per_joint: int = 9) -> np.ndarray:
+    """(k, 3) positions of the hand's shoulder (its arm's first joint) over a grid of the
+    torso's joint values (``per_joint`` per joint, 729 at most), the rest at rest."""
+    robot = scratch.problem.robot
+    torso = robot.groups["torso"]
+    axes = [np.linspace(robot.lower[i], robot.upper[i], per_joint) for i in torso]
+    q = np.repeat(robot.q_rest[None], max(1, per_joint ** len(torso)), axis=0)
+    if len(torso):
+        q[:, torso] = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(torso))
+    return np.array([shoulder(scratch, hand, qk) for qk in q])
 
 
 def _label(e: Edge) -> str:
