@@ -39,6 +39,7 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions, Scratch
@@ -106,7 +107,7 @@ class _Graph:
         reach = joint_reach(p.robot)
         self.reach = {h: options.reach_factor * reach[p.robot.hands[h].arm_idx[0]] for h in HANDS}
         self.shoulder = {h: shoulder(scratch, h, p.robot.q_rest) for h in HANDS}
-        self.shoulders = {h: shoulder_positions(scratch, h) for h in HANDS}
+        self.shoulders = {h: cKDTree(shoulder_positions(scratch, h)) for h in HANDS}
         self.rest = {h: scratch.kin.fk(p.robot.q_rest, p.robot.hands[h].grasp_frame)[:3, 3] for h in HANDS}
         self.weights = joint_weights(p.robot)
         self.rounds = 0  # intermediate placements added so many times
@@ -179,7 +180,7 @@ class _Graph:
         that fails is the slowest part of the nodes.  First, the object must be within the
         arm's reach of a shoulder position the torso allows (HiroNX's waist swings the
         shoulder round: from the shoulder at rest, goals it turns to looked out of reach)."""
-        if np.linalg.norm(self.shoulders[hand] - X_WO[:3, 3], axis=1).min() > self.reach[hand]:
+        if not self.within_reach(hand, X_WO[None, :3, 3])[0]:
             return False
         robot = self.scratch.problem.robot
         p = X_WO[:3, :3] @ self.lists[hand].X_OG[:, :3, 3].T + X_WO[:3, 3:4]  # (3, n) grasp positions
@@ -188,6 +189,11 @@ class _Graph:
         rng = np.random.default_rng([self.seed, 31, HANDS.index(hand), list(self.placements).index(pid)])
         return solve_position(robot, robot.hands[hand].grasp_frame, nearest, robot.q_rest, idx, rng,
                               IKOptions(restarts=8)).success
+
+    def within_reach(self, hand: str, p: np.ndarray) -> np.ndarray:
+        """(k,) bool: which points ``p`` (k, 3) are within the arm's reach of a shoulder
+        position the torso allows."""
+        return self.shoulders[hand].query(p)[0] <= self.reach[hand]
 
     def add_intermediate(self, stable: list[StablePlacement]) -> None:
         """Intermediate placements and their nodes, by ``options.sampler``: one fit per
@@ -200,7 +206,8 @@ class _Graph:
         if o.sampler == "vis-prm":
             self.visibility_nodes(fitted)
         else:
-            extra = intermediate_placements(fitted, len(stable), o, self.rest, self.shoulder, self.reach, self.ends())
+            within = {h: self.within_reach(h, fitted.X_WO[:, :3, 3]) for h in HANDS}
+            extra = intermediate_placements(fitted, len(stable), o, self.rest, within, self.ends())
             self.placements.update(extra)
             self.add_nodes(list(extra), intermediate=True)
         self.counts["intermediate_placements"] = len(set(self.placements) - {START, GOAL})
@@ -220,7 +227,7 @@ class _Graph:
         p = fitted.X_WO[:, :3, 3]
         pool = {}
         for h in HANDS:
-            within = np.flatnonzero(np.linalg.norm(p - self.shoulder[h], axis=1) <= self.reach[h])
+            within = np.flatnonzero(self.within_reach(h, p))
             near = np.linalg.norm(p[within, :2] - self.rest[h][:2], axis=1)
             pool[h] = within[np.argsort(near, kind="stable")[:o.vis_pool]]
         ends = {h for h in HANDS for pid in (START, GOAL) if len(self._grasps_at(h, pid))}
@@ -411,19 +418,18 @@ def _label(e: Edge) -> str:
 
 
 def intermediate_placements(fitted: Fitted, faces: int, options: GraphOptions, hands_at: dict[str, np.ndarray],
-                            shoulders: dict[str, np.ndarray], reach: dict[str, float],
-                            ends: dict[str, set[str]]) -> dict[str, np.ndarray]:
+                            within: dict[str, np.ndarray], ends: dict[str, set[str]]) -> dict[str, np.ndarray]:
     """``p1``, ``p2``...: per resting face (``faces``, most stable first), one of the
-    ``fitted`` placements on the scene's supports, ``intermediate`` at most, where the hands that must use it work most easily:
-    nearest (horizontally) to where the hand rests (``hands_at``: its grasp frame at the
-    rest configuration), for a hand with nodes at both the start and the goal (``ends``:
-    the hands with nodes at each); else the fit whose farther distance to the rests of a
-    hand of each end is least.  Within every such hand's reach (``shoulders``, ``reach``)."""
+    ``fitted`` placements on the scene's supports, ``intermediate`` at most, where the
+    hands that must use it work most easily: nearest (horizontally) to where the hand
+    rests (``hands_at``: its grasp frame at the rest configuration), for a hand with nodes
+    at both the start and the goal (``ends``: the hands with nodes at each); else the fit
+    whose farther distance to the rests of a hand of each end is least.  Within every such
+    hand's reach (``within``: per hand, (k,) bool over the fits)."""
     if not len(fitted):
         return {}
     p = fitted.X_WO[:, :3, 3]
     near = {h: np.linalg.norm(p[:, :2] - hands_at[h][:2], axis=1) for h in HANDS}
-    within = {h: np.linalg.norm(p - shoulders[h], axis=1) <= reach[h] for h in HANDS}
     both = sorted(ends[START] & ends[GOAL])
     pairs = [(h, h) for h in both] or [(a, b) for a in ends[START] for b in ends[GOAL]] or [("right", "left")]
     score = np.min([np.where(within[a] & within[b], np.maximum(near[a], near[b]), np.inf) for a, b in pairs], axis=0)
