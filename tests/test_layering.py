@@ -40,7 +40,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("model.*", "grasp.*", "placement.*", "scene", "motion.*"),
     ("roadmap.*",),
     ("trajectory", "replay", "artefacts"),
-    ("manip.*", "validate"),
+    ("manip.*", "dexterous.*", "validate"),
     ("show.*", "bench.*"),
     ("commands.*", "cli"),
 )

@@ -398,11 +398,13 @@ class _Graph:
         return failed
 
 
-def shoulder_positions(scratch: Scratch, hand: str, per_joint: int = 9) -> np.ndarray:
+def shoulder_positions(scratch: Scratch, hand: str, most: int = 729) -> np.ndarray:
     """(k, 3) positions of the hand's shoulder (its arm's first joint) over a grid of the
-    torso's joint values (``per_joint`` per joint, 729 at most), the rest at rest."""
+    torso's joint values (9 per joint up to three joints; ``most`` in all at most), the
+    rest at rest."""
     robot = scratch.problem.robot
     torso = robot.groups["torso"]
+    per_joint = max(2, min(9, int(round(most ** (1 / max(1, len(torso)))))))
     axes = [np.linspace(robot.lower[i], robot.upper[i], per_joint) for i in torso]
     q = np.repeat(robot.q_rest[None], max(1, per_joint ** len(torso)), axis=0)
     if len(torso):
