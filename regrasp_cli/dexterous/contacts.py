@@ -20,7 +20,7 @@ import itertools
 
 import numpy as np
 
-from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
+from regrasp_cli.grasp.quality import force_closure, origin_inside, primitive_wrenches
 
 
 def closure(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: float) -> float:
@@ -30,6 +30,13 @@ def closure(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: fl
     if len(p) < 2:
         return 0.0
     return force_closure(primitive_wrenches(p, n, mu, centre, rho))[1]
+
+
+def holds(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: float) -> bool:
+    """Force closure, as :func:`closure` > 0 decides it but at the very boundary (epsilon
+    under its 1e-6 margin), without the epsilon: no 6-D hull, most of the cost
+    (:func:`grasp.quality.origin_inside`)."""
+    return len(p) >= 2 and origin_inside(primitive_wrenches(p, n, mu, centre, rho))
 
 
 def gaitable(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: float) -> float:

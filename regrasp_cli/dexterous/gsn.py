@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from regrasp_cli.dexterous.contacts import closure
+from regrasp_cli.dexterous.contacts import closure, holds
 from regrasp_cli.dexterous.hand import InHand, reach, tip_targets
 from regrasp_cli.dexterous.surface import Surface, along, geodesic
 from regrasp_cli.dexterous.transfer import interpolate, poses_between
@@ -80,9 +80,14 @@ class GsScratch:
             p, n = np.delete(p, without, axis=0), np.delete(n, without, axis=0)
         return closure(p, n, self.options.friction, self.centre, self.rho)
 
+    def holds(self, p: np.ndarray, n: np.ndarray, without: int) -> bool:
+        """Do the contacts but finger ``without``'s hold the object (force closure)?"""
+        p, n = np.delete(p, without, axis=0), np.delete(n, without, axis=0)
+        return holds(p, n, self.options.friction, self.centre, self.rho)
+
     def liftable(self, c: GsConfig) -> tuple[int, ...]:
         """The fingers that may let go: the others still hold the object."""
-        return tuple(f for f in range(len(c.p)) if self.closure(c.p, c.n, f) > 0)
+        return tuple(f for f in range(len(c.p)) if self.holds(c.p, c.n, f))
 
     def collides(self, X_GO: np.ndarray, q: np.ndarray) -> bool:
         self.checks += 1
@@ -132,7 +137,7 @@ def gs_path(s: GsScratch, a: GsConfig, b_pose: np.ndarray, b_p: np.ndarray, rng:
         if q is None or np.abs(q - last.q).max() > o.max_joint_step or s.collides(X_GO, q):
             return None
         eps = s.closure(p, n)
-        if eps <= 0 or any(s.closure(p, n, f) <= 0 for f in moving):
+        if eps <= 0 or not all(s.holds(p, n, f) for f in moving):
             return None
         last = GsConfig(X_GO, p, n, q, eps)
         out.append(last)

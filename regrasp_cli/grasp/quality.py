@@ -220,6 +220,35 @@ def _positive_null_combination(W: np.ndarray) -> bool:
     return res.status == 0 and -res.fun > 1e-12
 
 
+def origin_inside(wrenches) -> bool:
+    """Is the origin strictly inside the convex hull of the wrenches (m, 6), i.e. force
+    closure, without the margin and the epsilon of :func:`force_closure` (no 6-D hull,
+    most of its cost)?  The points must affinely span R^6, the origin be interior to the
+    projections on the force and torque subspaces (cheap necessary tests), and a strictly
+    positive combination of the wrenches vanish (LP)."""
+    W = np.asarray(wrenches, dtype=float)
+    if W.ndim != 2 or W.shape[1] != 6:
+        raise ValueError(f"wrenches must have shape (m, 6), got {W.shape}")
+    if not np.all(np.isfinite(W)):
+        raise ValueError("wrenches contain non-finite values")
+    if W.shape[0] < 7:  # a 6-simplex needs 7 vertices
+        return False
+    # The origin can only be interior if the points affinely span R^6.
+    s = np.linalg.svd(W - W.mean(axis=0), compute_uv=False)
+    if s[-1] <= 1e-12 * max(s[0], 1.0):
+        return False
+    # Necessary conditions, much cheaper than the 6-D hull (about 1,000 facets for 32
+    # wrenches): the origin must be interior to the projections on the force and torque
+    # subspaces, and a strictly positive combination of the wrenches must vanish (LP).
+    for part in (W[:, :3], W[:, 3:]):
+        try:
+            if not np.all(ConvexHull(part).equations[:, -1] < 0.0):
+                return False
+        except QhullError:
+            return False
+    return _positive_null_combination(W)
+
+
 def force_closure(wrenches, tol: float = FORCE_CLOSURE_TOL) -> tuple[bool, float]:
     """Exact force-closure test and Ferrari–Canny L1 epsilon quality.
 
@@ -238,26 +267,7 @@ def force_closure(wrenches, tol: float = FORCE_CLOSURE_TOL) -> tuple[bool, float
         with a unit sum of normal forces; it is 0.0 when not force closure.
     """
     W = np.asarray(wrenches, dtype=float)
-    if W.ndim != 2 or W.shape[1] != 6:
-        raise ValueError(f"wrenches must have shape (m, 6), got {W.shape}")
-    if not np.all(np.isfinite(W)):
-        raise ValueError("wrenches contain non-finite values")
-    if W.shape[0] < 7:  # a 6-simplex needs 7 vertices
-        return False, 0.0
-    # The origin can only be interior if the points affinely span R^6.
-    s = np.linalg.svd(W - W.mean(axis=0), compute_uv=False)
-    if s[-1] <= 1e-12 * max(s[0], 1.0):
-        return False, 0.0
-    # Necessary conditions, much cheaper than the 6-D hull (about 1,000 facets for 32
-    # wrenches): the origin must be interior to the projections on the force and torque
-    # subspaces, and a strictly positive combination of the wrenches must vanish (LP).
-    for part in (W[:, :3], W[:, 3:]):
-        try:
-            if not np.all(ConvexHull(part).equations[:, -1] < 0.0):
-                return False, 0.0
-        except QhullError:
-            return False, 0.0
-    if not _positive_null_combination(W):
+    if not origin_inside(W):
         return False, 0.0
     try:
         hull = ConvexHull(W)

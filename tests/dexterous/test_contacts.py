@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from regrasp_cli.dexterous.contacts import closure, gaitable
+from regrasp_cli.dexterous.contacts import closure, gaitable, holds
 
 R = 0.03
 O = np.zeros(3)
@@ -57,3 +57,21 @@ def test_two_contacts_never_hold_and_one_lifted_finger_is_checked():
     # but without the top contact they sit on one side (colatitude 70.5° about -z) and need
     # mu > cot 70.5° = 0.354; with mu = 0.3 four hold it and one lifted finger drops it
     assert closure(p, n, 0.3, O, R) > 0 and gaitable(p, n, 0.3, O, R) == 0.0
+
+
+def test_the_quick_test_decides_as_the_epsilon_does():
+    """``holds`` (no 6-D hull) against ``closure`` > 0 on 300 random sets of 3 and 4
+    contacts on a sphere, half of them on one hemisphere: the same answer every time."""
+    rng = np.random.default_rng(0)
+    answers = []
+    for i in range(300):
+        n = rng.normal(size=(int(rng.integers(3, 5)), 3))
+        if i % 2:
+            n[:, 2] = np.abs(n[:, 2])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        eps = closure(R * n, n, 0.8, O, R)
+        if 0 < eps < 1e-4:
+            continue  # at the boundary the two margins differ
+        assert holds(R * n, n, 0.8, O, R) == (eps > 0)
+        answers.append(eps > 0)
+    assert 50 < sum(answers) < len(answers) - 50  # both answers exercised
