@@ -38,6 +38,8 @@ def test_seeds_as_a_list_and_defaults(tmp_path):
     s = load_suite(write(tmp_path, seeds=[5, 1], planners=list(PLANNERS)))
     assert s.seeds == (5, 1) and s.planners == PLANNERS
     assert load_suite(write(tmp_path, seeds=None)).seeds == tuple(range(20))
+    assert load_suite(write(tmp_path, sampler="vis-prm")).sampler == "vis-prm"
+    assert load_suite(write(tmp_path)).sampler == "faces"
 
 
 @pytest.mark.parametrize("fields, field, words", [
@@ -57,6 +59,8 @@ def test_seeds_as_a_list_and_defaults(tmp_path):
     ({"iterations": 2.5}, "iterations", "integer"),
     ({"grasp_target": "many"}, "grasp_target", "integer"),
     ({"extra": 1}, "extra", "unknown key"),
+    ({"style": "two-arm"}, "style", "expected one of auto"),
+    ({"sampler": "grid"}, "sampler", "expected one of faces, vis-prm"),
 ])
 def test_bad_fields_name_the_file_and_field(tmp_path, fields, field, words):
     path = write(tmp_path, **fields)
