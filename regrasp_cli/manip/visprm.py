@@ -31,7 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-from regrasp_cli.manip.graph import GOAL, START, Node, type2
+from regrasp_cli.manip.graph import Node, type2
 
 
 @dataclass(frozen=True)
