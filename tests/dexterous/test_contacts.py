@@ -75,3 +75,22 @@ def test_the_quick_test_decides_as_the_epsilon_does():
         assert holds(R * n, n, 0.8, O, R) == (eps > 0)
         answers.append(eps > 0)
     assert 50 < sum(answers) < len(answers) - 50  # both answers exercised
+
+
+def _equator(angles_deg) -> tuple[np.ndarray, np.ndarray]:
+    phi = np.radians(angles_deg)
+    n = np.stack([np.cos(phi), np.sin(phi), np.zeros(len(phi))], axis=1)
+    return R * n, n
+
+
+def test_fingers_around_the_object_may_each_let_go_a_thumb_opposing_three_may_not():
+    """Why finger gaiting needs the fingers around the object (§IV): four contacts 90°
+    apart on the equator keep force closure without any one of them (mu 0.5 and up); a
+    thumb opposite three fingers side by side (30° apart) holds the sphere, but without the
+    thumb the three push from one side and nothing holds it."""
+    p, n = _equator([0, 90, 180, 270])
+    assert gaitable(p, n, 0.5, O, R) > 0.05 and gaitable(p, n, 0.8, O, R) > 0.2
+    p, n = _equator([180, -30, 0, 30])
+    assert closure(p, n, 0.8, O, R) > 0.1
+    assert closure(p[1:], n[1:], 0.8, O, R) == 0.0 and gaitable(p, n, 0.8, O, R) == 0.0
+    assert all(closure(np.delete(p, f, 0), np.delete(n, f, 0), 0.8, O, R) > 0 for f in (1, 2, 3))
