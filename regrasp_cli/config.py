@@ -312,10 +312,13 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
 
     g = f.sub("groups")
     g.only("torso", "right_arm", "left_arm")
-    groups = {name: g.names(name) for name in ("torso", "right_arm", "left_arm")}
-    for name in ("right_arm", "left_arm"):
-        if not groups[name]:
-            raise g.error(name, "expected at least one joint")
+    if not g.data:  # a hand alone (the wrist is the base): for in-hand planning only
+        groups = {name: () for name in ("torso", "right_arm", "left_arm")}
+    else:
+        groups = {name: g.names(name) for name in ("torso", "right_arm", "left_arm")}
+        for name in ("right_arm", "left_arm"):
+            if not groups[name]:
+                raise g.error(name, "expected at least one joint")
 
     h = f.sub("hands")
     h.only(*HAND_SIDES)

@@ -67,6 +67,9 @@ def load_problem(path: str | Path, cache_dir: Path | None, progress: PairProgres
     ``cache_dir`` or computed (reporting to ``progress(done, total)``, if given)."""
     spec = load_scene_spec(path)
     robot = load_robot(spec.robot)
+    if not any(len(robot.groups[a]) for a in ("right_arm", "left_arm")):
+        raise InputError(spec.file, "robot", f"{spec.robot} is a hand alone (its groups are empty): it has no arm "
+                                             "to pick and place with (hands alone are for in-hand planning)")
     obj = scene_object(spec)
     for i, ob in enumerate(spec.obstacles):  # fail here, naming the scene file and field
         if ob.shape == "mesh":
