@@ -29,7 +29,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from make_hironx_urdf import Urdf, cylinder  # noqa: E402  (the same URDF writer)
+from make_hironx_urdf import Urdf, cylinder, write  # noqa: E402  (the same URDF writer)
 
 OUT = Path(__file__).resolve().parents[1] / "regrasp_cli" / "data" / "robots" / "hand4" / "robot.urdf"
 COLOURS = {"grey": "0.6 0.6 0.63 1", "dark": "0.25 0.25 0.28 1", "tip": "0.12 0.12 0.12 1"}
@@ -67,9 +67,7 @@ def urdf_text() -> str:
 
 
 def main() -> None:
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(urdf_text())
-    print(f"wrote {OUT}")
+    write(OUT, urdf_text())
 
 
 if __name__ == "__main__":

@@ -240,10 +240,15 @@ def urdf_text() -> str:
     return u.text()
 
 
+def write(out: Path, text: str) -> None:
+    """Write a generated URDF (the robot scripts share this)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    print(f"wrote {out}")
+
+
 def main() -> None:
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(urdf_text())
-    print(f"wrote {OUT}")
+    write(OUT, urdf_text())
 
 
 if __name__ == "__main__":

@@ -112,6 +112,7 @@ class _Graph:
         self.weights = joint_weights(p.robot)
         self.rounds = 0  # intermediate placements added so many times
         self.names = itertools.count(1)  # of the Visibility-PRMs' placements: p1, p2...
+        self.fitted: Fitted | None = None  # the stable placements fitted on the scene's supports
 
     # ---------------------------------------------------------------- nodes
 
@@ -200,8 +201,10 @@ class _Graph:
         resting face with a few grasps each (:func:`intermediate_placements`), or the
         Visibility-PRM's guards, connectors and corners (:meth:`visibility_nodes`)."""
         spec, o = self.scratch.problem.spec, self.options
-        fitted = fit_placements(stable, scene_supports(spec.obstacles, spec.supports, spec.file),
-                                self.scratch.problem.object.mesh, spec.obstacles, o.fit)
+        if self.fitted is None:  # once: a second Vis-PRM samples the same fits
+            self.fitted = fit_placements(stable, scene_supports(spec.obstacles, spec.supports, spec.file),
+                                         self.scratch.problem.object.mesh, spec.obstacles, o.fit)
+        fitted = self.fitted
         self.rounds += 1
         if o.sampler == "vis-prm":
             self.visibility_nodes(fitted)
