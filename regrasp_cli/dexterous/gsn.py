@@ -39,6 +39,7 @@ from regrasp_cli.dexterous.transfer import interpolate, poses_between
 from regrasp_cli.grasp.single import GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface as SampledSurface
 from regrasp_cli.grasp.workspace import FingerWorkspace
+from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.spatial import inverse
 
 
@@ -46,7 +47,7 @@ from regrasp_cli.spatial import inverse
 class GsOptions:
     friction: float = 0.8
     step_m: float = 0.002  # object translation and contact travel per step of a path
-    step_rad: float = 0.03  # object rotation per step
+    step_rad: float = 0.05  # object rotation per step
     max_joint_step: float = 0.2  # rad per step: more is an IK branch jump
     tol: float = 1e-4  # m, fingertip centre on its target
 
@@ -57,7 +58,7 @@ class GsConfig:
     p: np.ndarray  # (n, 3) contacts, object frame
     n: np.ndarray  # (n, 3) outward normals there
     q: np.ndarray  # (nq,) robot configuration (fingers set)
-    eps: float  # force-closure epsilon of the n contacts
+    eps: float  # force-closure epsilon of the n contacts (NaN between a GS_n path's ends: not computed)
 
 
 class GsScratch:
@@ -73,7 +74,10 @@ class GsScratch:
         self.hand = InHand(hm.robot, hm.hand.side, hm.q.copy(), tuple(range(len(hm.hand.finger_idx))))
         self.X_WG = hm.X_WG
         self.centre = sampled.mass_centre
-        self.checks = 0
+        self.kin = Kinematics(hm.robot)
+        self.checks = 0  # collision checks
+        self.generated = 0  # configurations generated (samples and edge ends)
+        self.failures: dict[str, int] = {}  # why GS_n paths failed, per check
 
     def closure(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> float:
         if without is not None:
@@ -134,12 +138,16 @@ def gs_path(s: GsScratch, a: GsConfig, b_pose: np.ndarray, b_p: np.ndarray, rng:
             p[moving], n[moving] = pts, s.surface.normals[tri]
         X_GO = poses[i]
         q = reach(s.hand, last.q, tip_targets(s.X_WG @ X_GO, p, n, radii), rng, restarts=0, tol=o.tol)
-        if q is None or np.abs(q - last.q).max() > o.max_joint_step or s.collides(X_GO, q):
+        why = ("ik" if q is None else "joint step" if np.abs(q - last.q).max() > o.max_joint_step
+               else "collision" if s.collides(X_GO, q) else None)
+        if why is None:  # closure without a finger implies it with all (more contacts)
+            why = "n-1 closure" if not all(s.holds(p, n, f) for f in moving) else None
+        if why is not None:
+            s.failures[why] = s.failures.get(why, 0) + 1
             return None
-        eps = s.closure(p, n)
-        if eps <= 0 or not all(s.holds(p, n, f) for f in moving):
-            return None
-        last = GsConfig(X_GO, p, n, q, eps)
+        last = GsConfig(X_GO, p, n, q, np.nan if moving else a.eps)
         out.append(last)
+    if moving:  # the epsilon (a 6-D hull) of the last step only: the contacts stay on it
+        out[-1] = GsConfig(out[-1].X_GO, out[-1].p, out[-1].n, out[-1].q, s.closure(out[-1].p, out[-1].n))
     return out
 

@@ -1,0 +1,232 @@
+"""Transfer and regrasping paths, and the reduction of a GS_n path to them (seed 003 §IV).
+
+A *transfer* moves the object with every contact fixed on it (the fingers follow by IK);
+a *regrasping path* keeps the object still while one finger lets go and moves to a new
+contact, the other n-1 holding it in force closure.  Only these two are physically
+feasible; a path in GS_n, where contacts slide while the object moves, is not, but when
+every n-1 fingers' grasp along it is force closure it can be replaced by alternating
+transfers and regrasps that stay near it (the reduction property, §IV-§V).
+:func:`reduce_path` does this greedily: it carries the object along the GS_n path with the
+contacts held fixed, as long as the fingers can follow and no contact has drifted more
+than ``gait_m`` from the path's; then each drifted finger in turn steps to the path's
+contact (a regrasp), and the carrying goes on from there.
+
+A finger's regrasping path (:func:`finger_step`) lifts the fingertip off by opening the
+finger (its joints towards the hand's open values) until the tip is clear of the contact's
+tangent plane, moves to where the finger, opened the same way, is as clear over the new
+contact, and closes on it: three
+straight joint-space segments, each checked for collisions of that finger (with the
+object, the palm and the other fingers) every ``check_rad``; higher lifts are tried when
+a lower one collides.
+
+Frames: the grasp frame G (fixed), the object frame O; metres, radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from regrasp_cli.dexterous.gsn import GsConfig, GsScratch
+from regrasp_cli.dexterous.hand import reach, tip_targets
+from regrasp_cli.dexterous.transfer import interpolate
+
+
+@dataclass(frozen=True)
+class GaitOptions:
+    gait_m: float = 0.012  # contact drift from the GS_n path before a finger steps
+    lifts_m: tuple[float, ...] = (0.004, 0.008, 0.016, 0.03)  # fingertip lift heights tried
+    check_rad: float = 0.04  # joint step between collision checks of a moving finger
+    max_joint_step: float = 0.2  # rad per step of a transfer: more is an IK branch jump
+
+
+@dataclass(frozen=True)
+class Transfer:
+    """The object moves, the contacts stay: poses (k, 4, 4) in G and configurations (k, nq),
+    the first the state it starts from."""
+
+    X_GO: np.ndarray
+    q: np.ndarray
+    p: np.ndarray  # (n, 3) contacts, object frame
+    n: np.ndarray  # (n, 3) outward normals
+    eps: float  # their force-closure epsilon
+
+    @property
+    def end(self) -> GsConfig:
+        return GsConfig(self.X_GO[-1], self.p, self.n, self.q[-1], self.eps)
+
+
+@dataclass(frozen=True)
+class Regrasp:
+    """Finger ``finger`` moves from contact ``before.p[finger]`` to ``after.p[finger]``
+    with the object still: configurations (k, nq), lifted from the second to the last but
+    one."""
+
+    finger: int
+    q: np.ndarray
+    before: GsConfig
+    after: GsConfig
+
+    @property
+    def end(self) -> GsConfig:
+        return self.after
+
+
+Piece = Transfer | Regrasp
+
+
+def _segment_free(s: GsScratch, q_a: np.ndarray, q_b: np.ndarray, finger: int, others: set[int],
+                  check_rad: float) -> bool:
+    k = max(1, int(np.ceil(np.abs(q_b - q_a).max() / check_rad)))
+    for t in np.linspace(0.0, 1.0, k + 1)[1:]:
+        s.checks += 1
+        if s.hm.collides(q_a + t * (q_b - q_a), others, finger):
+            return False
+    return True
+
+
+def _lifted(s: GsScratch, q: np.ndarray, f: int, X_WO: np.ndarray, p_O: np.ndarray, n_O: np.ndarray,
+            h: float, rng: np.random.Generator) -> np.ndarray | None:
+    """Finger ``f`` moved from ``q`` so that its fingertip is ``h`` off the contact's
+    tangent plane (``p_O``, ``n_O``, object frame): opened (its joints towards the hand's
+    open values), or by IK straight off along the normal, or off and back towards the
+    finger's base (a stretched finger cannot go straight); None when none clears."""
+    idx, tip = s.hm.hand.finger_idx[f], s.hm.hand.tip_frames[f]
+    p_W, n_W = X_WO[:3, :3] @ p_O + X_WO[:3, 3], X_WO[:3, :3] @ n_O
+    r = s.hand.radii[f]
+    centre = p_W + r * n_W
+    root = s.X_WG[:3, :3] @ s.workspaces[f].root + s.X_WG[:3, 3]
+    back = (root - centre) / max(np.linalg.norm(root - centre), 1e-9)
+    for t in np.linspace(0.05, 1.0, 20):  # opened: forward kinematics only, the cheapest
+        q_t = q.copy()
+        q_t[idx] = (1 - t) * q[idx] + t * s.hm.q[idx]
+        if (s.kin.fk(q_t, tip)[:3, 3] - p_W) @ n_W - r >= h:
+            return q_t
+    targets = np.zeros((len(s.hand.fingers), 3))
+    for d in (n_W, n_W + back, n_W + 2 * back):
+        targets[f] = centre + h * d / np.linalg.norm(d)
+        up = reach(s.hand, q, targets, rng, fingers=(f,), restarts=0, tol=0.1 * h)  # loosely: any clear point
+        if up is not None and (s.kin.fk(up, tip)[:3, 3] - p_W) @ n_W - r >= 0.9 * h:
+            return up
+    return None
+
+
+def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.ndarray, rng: np.random.Generator,
+                o: GaitOptions = GaitOptions(), q_hint: np.ndarray | None = None) -> Regrasp | None:
+    """The regrasping path of finger ``f`` from its contact in ``c`` to ``p_new`` (3,) with
+    outward normal ``n_new`` (object frame), or None: the others must hold the object, the
+    new grasp be force closure, the finger reach it and move there without collision.
+    ``q_hint``: joint values near the new contact's (an IK seed)."""
+    if not s.holds(c.p, c.n, f):
+        return None
+    p, n = c.p.copy(), c.n.copy()
+    p[f], n[f] = p_new, n_new
+    eps = s.closure(p, n)
+    if eps <= 0:
+        return None
+    X_WO = s.X_WG @ c.X_GO
+    r = s.hand.radii[f]
+    others = set(range(len(p))) - {f}
+    s.hm.set_object(np.linalg.inv(c.X_GO))
+    seed = c.q.copy()  # the other fingers stay; finger f from the hint
+    if q_hint is not None:
+        idx = s.hm.hand.finger_idx[f]
+        seed[idx] = q_hint[idx]
+    down = reach(s.hand, seed, tip_targets(X_WO, p, n, s.hand.radii), rng, fingers=(f,), restarts=1, tol=s.options.tol)
+    if down is None:
+        return None
+    for h in o.lifts_m:
+        up_a = _lifted(s, c.q, f, X_WO, c.p[f], c.n[f], h, rng)
+        up_b = _lifted(s, down, f, X_WO, p[f], n[f], h, rng)
+        if up_a is None or up_b is None:
+            continue
+        qs = [c.q, up_a, up_b, down]
+        if all(_segment_free(s, a, b, f, others, o.check_rad) for a, b in zip(qs, qs[1:])):
+            return Regrasp(f, np.array(qs), c, GsConfig(c.X_GO, p, n, down, eps))
+    return None
+
+
+def _transfer_step(s: GsScratch, state: GsConfig, X_GO: np.ndarray, rng: np.random.Generator,
+                   o: GaitOptions) -> GsConfig | None:
+    q = reach(s.hand, state.q, tip_targets(s.X_WG @ X_GO, state.p, state.n, s.hand.radii), rng, restarts=0,
+              tol=s.options.tol)
+    if q is None or np.abs(q - state.q).max() > o.max_joint_step or s.collides(X_GO, q):
+        return None
+    return GsConfig(X_GO, state.p, state.n, q, state.eps)
+
+
+def reduce_path(s: GsScratch, path: list[GsConfig], rng: np.random.Generator,
+                o: GaitOptions = GaitOptions()) -> list[Piece] | None:
+    """Transfers and regrasps that follow the GS_n path (``path[0]`` the state it starts
+    from, consecutive configurations one step apart), or None when they cannot.  They end
+    at ``path[-1]``'s pose and contacts (within a quarter of ``gait_m``)."""
+    pieces: list[Piece] = []
+    state, synced, end = path[0], 0, len(path) - 1  # synced: where the contacts were last the path's
+    while True:
+        carried = [state]  # carry with the contacts held, as far as the fingers follow
+        while synced + len(carried) <= end:
+            i = synced + len(carried)
+            nxt = _transfer_step(s, carried[-1], path[i].X_GO, rng, o)
+            if nxt is None or np.linalg.norm(path[i].p - state.p, axis=1).max() > o.gait_m:
+                break
+            carried.append(nxt)
+        # the drifted fingers step to the path's contacts where the carrying stopped, or
+        # earlier (less drift, the fingers less stretched) when they cannot there
+        for j in _backoff(synced, synced + len(carried) - 1):
+            steps = _step_fingers(s, carried[j - synced], path[j], rng, o)
+            if steps is not None:
+                break
+        else:
+            return None
+        if j > synced:
+            pieces.append(_transfer(carried[:j - synced + 1]))
+        pieces += steps
+        state, synced = (steps[-1].after if steps else carried[j - synced]), j
+        if j == end:
+            return pieces
+
+
+def _backoff(synced: int, last: int) -> list[int]:
+    """Path indices to try a gait at, from ``last`` back towards ``synced`` (excluded)."""
+    out, j = [], last
+    if last == synced:
+        return []
+    while j > synced:
+        out.append(j)
+        j = synced + (j - synced) // 2
+    return out
+
+
+def _step_fingers(s: GsScratch, state: GsConfig, target: GsConfig, rng: np.random.Generator,
+                  o: GaitOptions) -> list[Regrasp] | None:
+    """Each finger drifted from ``target``'s contacts steps to it, the farthest first."""
+    steps: list[Regrasp] = []
+    drift = np.linalg.norm(target.p - state.p, axis=1)
+    for k, f in enumerate(np.argsort(-drift)):
+        if drift[f] <= (1e-4 if k == 0 else 0.25 * o.gait_m):  # at least the farthest
+            break
+        step = finger_step(s, state, int(f), target.p[f], target.n[f], rng, o, q_hint=target.q)
+        if step is None:
+            return None
+        steps.append(step)
+        state = step.after
+    return steps
+
+
+def _transfer(states: list[GsConfig]) -> Transfer:
+    c = states[0]
+    return Transfer(np.array([x.X_GO for x in states]), np.array([x.q for x in states]), c.p, c.n, c.eps)
+
+
+def carry(s: GsScratch, a: GsConfig, X_GO: np.ndarray, rng: np.random.Generator, step_m: float, step_rad: float,
+          o: GaitOptions = GaitOptions()) -> Transfer | None:
+    """The transfer of the object from ``a`` to ``X_GO`` (4, 4) with ``a``'s contacts, every
+    step checked (IK, joint step, collisions), or None."""
+    states = [a]
+    for X in interpolate(a.X_GO, X_GO, step_m, step_rad)[1:]:
+        nxt = _transfer_step(s, states[-1], X, rng, o)
+        if nxt is None:
+            return None
+        states.append(nxt)
+    return _transfer(states)

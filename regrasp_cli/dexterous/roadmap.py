@@ -1,0 +1,256 @@
+"""The GS_n roadmap, single-query (seed 003 §V): a tree of GS_n configurations grown from
+the start towards the goal pose, whose edges are linear paths in GS_n.
+
+Nodes are sampled the RLG way (§V, :func:`rlg_sample`): with the object's pose given,
+each finger's contact is drawn among the surface points inside the finger's workspace
+whose normal faces the closing fingertip, and its joints follow by IK; a sample is kept
+when the hand does not collide (finger-finger, finger-object, object-palm) and the
+contacts are force closure.  The start's grasp is the best of such samples at the start
+pose: most fingers that may let go, then the largest epsilon.
+
+An edge (:func:`extend`) turns and moves the object from a node towards a target pose by
+at most ``step_rad`` and ``step_m``, each contact sliding along the geodesic to the
+surface point nearest where its fingertip is (the fingers stay where they are in the hand
+as far as the surface allows), every step checked by :func:`gsn.gs_path` (IK, joint step,
+collisions, force closure of all fingers and of every n-1 of them whose contact moves).
+Targets are the goal pose (probability ``goal_bias``) or a random pose; the tree's node
+nearest the target extends.  The paper builds a roadmap of GS_n's connected components
+and links them by regrasp-transfer sequences; for the reorientations we plan, GS_n around
+the start is one component (a sphere's, as the paper says, always is), so the tree stays
+in it, and a node that reaches the goal pose ends the query.  The goal is a pose only:
+any grasp at it will do (seed 003 §IV's final grasp is the one the path arrives with).
+
+Frames: the grasp frame G (fixed), the object frame O; metres, radians.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp, carry, finger_step, reduce_path
+from regrasp_cli.dexterous.gsn import GsConfig, GsScratch, gs_path
+from regrasp_cli.dexterous.hand import reach, tip_targets
+from regrasp_cli.spatial import inverse
+
+
+@dataclass(frozen=True)
+class RoadmapOptions:
+    step_rad: float = 0.35  # object rotation per edge
+    step_m: float = 0.01  # object translation per edge
+    goal_bias: float = 0.5  # probability that the goal pose is the target
+    nodes: int = 300  # budget of extensions tried
+    start_samples: int = 60  # RLG samples at the start pose
+    candidates: int = 40  # contact candidates per finger per sample
+    box_m: float = 0.02  # random targets within this of the start position (each axis)
+
+
+@dataclass
+class RoadmapStats:
+    generated: int = 0  # configurations tried (RLG samples and edge ends)
+    kept: int = 0  # nodes of the tree
+    iterations: int = 0
+    start_liftable: int = 0  # fingers of the start grasp that may let go
+
+
+@dataclass
+class Tree:
+    nodes: list[GsConfig] = field(default_factory=list)
+    parent: list[int] = field(default_factory=list)
+    edge: list[list[Piece]] = field(default_factory=list)  # transfers and regrasps from the parent
+
+    def add(self, c: GsConfig, parent: int, pieces: list[Piece]) -> int:
+        self.nodes.append(c)
+        self.parent.append(parent)
+        self.edge.append(pieces)
+        return len(self.nodes) - 1
+
+    def path(self, i: int) -> list[Piece]:
+        """The transfers and regrasps from the root to node ``i``."""
+        out: list[Piece] = []
+        while i > 0:
+            out[:0] = self.edge[i]
+            i = self.parent[i]
+        return out
+
+
+def _candidates(s: GsScratch, X_GO: np.ndarray, f: int) -> tuple[np.ndarray, np.ndarray]:
+    """Contact candidates of finger ``f`` with the object at ``X_GO``: indices (c,) of
+    surface samples whose fingertip centre lies in the finger's workspace and whose normal
+    faces the closing fingertip, and the nearest workspace sample of each (c,)."""
+    ws, r = s.workspaces[f], s.hand.radii[f]
+    c_G = (s.sampled.points + r * s.sampled.normals) @ X_GO[:3, :3].T + X_GO[:3, 3]
+    inside = np.nonzero(s.hm.voxels(s.workspaces)[f].lookup(c_G) >= 0)[0]
+    if inside.size == 0:
+        return inside, inside
+    near = ws.tree.query(c_G[inside])[1]
+    n_G = s.sampled.normals[inside] @ X_GO[:3, :3].T
+    facing = -np.einsum("ij,ij->i", n_G, ws.sample_closing[near]) > 0.2
+    return inside[facing], near[facing]
+
+
+def _seed(s: GsScratch, q: np.ndarray, f: int, near: int) -> np.ndarray:
+    q = q.copy()
+    q[s.hm.hand.finger_idx[f]] = s.workspaces[f].sample_q[near]
+    return q
+
+
+def rlg_sample(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, candidates: int = 40) -> GsConfig | None:
+    """A random GS_n configuration with the object at ``X_GO`` (4, 4), or None (§V: the
+    contacts are the free parameters, the joints follow by IK)."""
+    s.generated += 1
+    s.hm.set_object(inverse(X_GO))
+    n_f = len(s.hand.fingers)
+    q = s.hm.q.copy()
+    points, normals = np.zeros((n_f, 3)), np.zeros((n_f, 3))
+    placed: set[int] = set()
+    for f in map(int, rng.permutation(n_f)):
+        idx, near = _candidates(s, X_GO, f)
+        for k in rng.permutation(idx.size)[:candidates]:
+            i = idx[k]
+            p, n = s.sampled.points[i:i + 1], s.sampled.normals[i:i + 1]
+            targets = np.zeros((n_f, 3))
+            targets[f] = tip_targets(s.X_WG @ X_GO, p, n, s.hand.radii[f:f + 1])[0]
+            q_try = reach(s.hand, _seed(s, q, f, near[k]), targets, rng, fingers=(f,), restarts=0, tol=s.options.tol)
+            if q_try is not None and not s.hm.collides(q_try, placed, f):
+                q, points[f], normals[f] = q_try, p[0], n[0]
+                placed.add(f)
+                break
+        else:
+            return None
+    eps = s.closure(points, normals)
+    return GsConfig(X_GO.copy(), points, normals, q, eps) if eps > 0 else None
+
+
+def comfort(s: GsScratch, c: GsConfig) -> float:
+    """How far the finger joints are from their limits: the least margin, as a fraction
+    of each joint's range (0 at a limit, 0.5 mid-range)."""
+    idx = np.concatenate(s.hm.hand.finger_idx)
+    lo, hi = s.hm.robot.lower[idx], s.hm.robot.upper[idx]
+    return float(np.min(np.minimum(c.q[idx] - lo, hi - c.q[idx]) / (hi - lo)))
+
+
+def start_config(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, o: RoadmapOptions) -> GsConfig | None:
+    """The best of ``o.start_samples`` RLG samples at ``X_GO``: most fingers that may let
+    go, then the finger joints farthest from their limits (room to gait)."""
+    best, key = None, (-1, -1.0)
+    for _ in range(o.start_samples):
+        c = rlg_sample(s, X_GO, rng, o.candidates)
+        if c is None:
+            continue
+        k = (len(s.liftable(c)), comfort(s, c))
+        if k > key:
+            best, key = c, k
+    return best
+
+
+def regrasp_one(s: GsScratch, c: GsConfig, rng: np.random.Generator, o: RoadmapOptions,
+                g: GaitOptions) -> Regrasp | None:
+    """One finger that may let go moves to a random new contact (§IV's regrasping path;
+    the RLG sampling of that finger's contact), or None."""
+    liftable = s.liftable(c)
+    if not liftable:
+        return None
+    f = int(rng.choice(liftable))
+    idx, near = _candidates(s, c.X_GO, f)
+    for k in rng.permutation(idx.size)[:max(1, o.candidates // 8)]:
+        i = idx[k]
+        step = finger_step(s, c, f, s.sampled.points[i], s.sampled.normals[i], rng, g, _seed(s, c.q, f, near[k]))
+        if step is not None:
+            return step
+    return None
+
+
+def step_towards(X_a: np.ndarray, X_b: np.ndarray, step_rad: float, step_m: float) -> np.ndarray:
+    """The pose from X_a towards X_b, at most ``step_rad`` and ``step_m`` away (X_b when
+    within both)."""
+    angle = Rotation.from_matrix(X_a[:3, :3].T @ X_b[:3, :3]).magnitude()
+    dist = np.linalg.norm(X_b[:3, 3] - X_a[:3, 3])
+    t = min(1.0, step_rad / angle if angle > 0 else 1.0, step_m / dist if dist > 0 else 1.0)
+    if t >= 1.0:
+        return X_b.copy()
+    X = np.eye(4)
+    X[:3, :3] = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([X_a[:3, :3], X_b[:3, :3]])))([t]).as_matrix()[0]
+    X[:3, 3] = (1 - t) * X_a[:3, 3] + t * X_b[:3, 3]
+    return X
+
+
+def slide(s: GsScratch, a: GsConfig, X_new: np.ndarray, rng: np.random.Generator,
+          g: GaitOptions) -> list[Piece] | None:
+    """The GS_n path from ``a`` to the object at ``X_new``, each contact sliding to the
+    surface point nearest its fingertip there, reduced to transfers and regrasps; None when
+    a step fails (:func:`gsn.gs_path`) or the reduction does (:func:`gait.reduce_path`)."""
+    centres_G = inverse(s.X_WG) @ np.c_[s.hand.tips(s.kin, a.q), np.ones(len(a.p))].T
+    tri, uv = s.surface.locate((inverse(X_new) @ centres_G)[:3].T)
+    steps = gs_path(s, a, X_new, s.surface.points(tri, uv), rng)
+    if not steps:
+        return None
+    return reduce_path(s, [a] + steps, rng, g)
+
+
+def _distance(X_a: np.ndarray, X_b: np.ndarray, rho: float) -> float:
+    """Pose distance: rotation angle plus translation over the object's radius."""
+    return Rotation.from_matrix(X_a[:3, :3].T @ X_b[:3, :3]).magnitude() + np.linalg.norm(X_b[:3, 3] - X_a[:3, 3]) / rho
+
+
+def _random_pose(X_start: np.ndarray, box: float, rng: np.random.Generator) -> np.ndarray:
+    X = np.eye(4)
+    X[:3, :3] = Rotation.random(random_state=rng).as_matrix()
+    X[:3, 3] = X_start[:3, 3] + rng.uniform(-box, box, 3)
+    return X
+
+
+def _expand(s: GsScratch, a: GsConfig, target: np.ndarray, to_goal: bool, rng: np.random.Generator,
+            o: RoadmapOptions, g: GaitOptions) -> list[Piece] | None:
+    """Towards ``target``: slide the contacts (the GS_n path; first towards the goal, the
+    fingers staying where they are), or carry the object with them fixed; when neither
+    goes, one finger regrasps."""
+    X_new = step_towards(a.X_GO, target, o.step_rad, o.step_m)
+    for how in (0, 1) if to_goal else rng.permutation(2):
+        s.generated += 1
+        if how == 0:
+            pieces = slide(s, a, X_new, rng, g)
+        else:
+            t = carry(s, a, X_new, rng, s.options.step_m, s.options.step_rad, g)
+            pieces = None if t is None else [t]
+        if pieces:
+            return pieces
+    s.generated += 1
+    r = regrasp_one(s, a, rng, o, g)
+    return None if r is None else [r]
+
+
+def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Generator,
+         o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions()
+         ) -> tuple[list[Piece] | None, Tree, RoadmapStats]:
+    """Grow the tree from ``start`` until a node is at ``X_goal`` (4, 4, grasp frame): the
+    transfers and regrasps from the start to it, or None within ``o.nodes`` expansions."""
+    tree = Tree()
+    tree.add(start, -1, [])
+    stats = RoadmapStats(start_liftable=len(s.liftable(start)))
+    goal_fails: dict[int, int] = {}  # node -> failed expansions towards the goal
+    for it in range(o.nodes):
+        stats.iterations = it + 1
+        to_goal = rng.random() < o.goal_bias
+        target = X_goal if to_goal else _random_pose(start.X_GO, o.box_m, rng)
+        # nearest node (towards the goal: of those that failed it less than twice), ties
+        # (a regrasp keeps the pose) broken at random
+        d = np.array([_distance(c.X_GO, target, s.rho) for c in tree.nodes]) + 1e-9 * rng.random(len(tree.nodes))
+        if to_goal:
+            d[[k for k, n in goal_fails.items() if n >= 2]] = np.inf
+            if np.isinf(d).all():
+                continue
+        i = int(np.argmin(d))
+        pieces = _expand(s, tree.nodes[i], target, to_goal, rng, o, g)
+        if not pieces:
+            if to_goal:
+                goal_fails[i] = goal_fails.get(i, 0) + 1
+            continue
+        j = tree.add(pieces[-1].end, i, pieces)
+        if _distance(tree.nodes[j].X_GO, X_goal, s.rho) < 1e-9:
+            stats.kept = len(tree.nodes)
+            return tree.path(j), tree, stats
+    stats.kept = len(tree.nodes)
+    return None, tree, stats

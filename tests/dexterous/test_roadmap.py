@@ -1,0 +1,120 @@
+"""Finger gaiting on `builtin:hand4` (four 3-DoF fingers round a palm, seed 003's hand)
+holding a 7 cm sphere: the GS_n tree reaches a goal orientation more than a radian away,
+and what it returns is physically feasible piece by piece (§IV): every transfer keeps its
+contacts and the fingertips on them while the object moves a little at a time, every
+regrasp keeps the object still while the other fingers hold it in force closure and ends
+on a force-closure grasp, and each piece starts where the previous one ended."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from conftest import ROOT
+
+from regrasp_cli.dexterous.gait import Regrasp, Transfer, finger_step, reduce_path
+from regrasp_cli.dexterous.gsn import GsScratch, gs_path
+from regrasp_cli.dexterous.hand import tip_targets
+from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, start_config, step_towards
+from regrasp_cli.dexterous.surface import Surface
+from regrasp_cli.grasp.single import HandModel
+from regrasp_cli.grasp.surface import build_surface, sampling_step
+from regrasp_cli.grasp.workspace import hand_workspace
+from regrasp_cli.model.robot import load_robot
+from regrasp_cli.model.selfcollision import disabled_pairs
+from regrasp_cli.spatial import inverse
+
+R = 0.035
+
+
+@pytest.fixture(scope="module")
+def gs(cache_dir):
+    robot = load_robot(ROOT / "regrasp_cli" / "data" / "robots" / "hand4" / "robot.yaml")
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=R)
+    hm = HandModel(robot, "right", mesh, disabled_pairs(robot, cache_dir).links(), 0.002)
+    ws = hand_workspace(robot, "right", cache_dir=cache_dir)
+    sampled = build_surface(mesh, sampling_step(0.004), np.random.default_rng(0))
+    return GsScratch(hm, ws, sampled, Surface.of(mesh), R)
+
+
+def _goal(angle: float, axis) -> np.ndarray:
+    X = np.eye(4)
+    X[:3, :3] = Rotation.from_rotvec(angle * np.asarray(axis, float) / np.linalg.norm(axis)).as_matrix()
+    return X
+
+
+def _assert_feasible(s: GsScratch, pieces, start):
+    state_q, state_X, p = start.q, start.X_GO, start.p
+    for piece in pieces:
+        assert np.allclose(piece.q[0], state_q, atol=1e-9)
+        if isinstance(piece, Transfer):
+            assert np.allclose(piece.X_GO[0], state_X) and np.allclose(piece.p, p)
+            for X, q in zip(piece.X_GO, piece.q):
+                tips = s.hand.tips(s.kin, q)
+                assert np.abs(tips - tip_targets(s.X_WG @ X, piece.p, piece.n, s.hand.radii)).max() < 3e-4
+            dX = [np.linalg.norm(a[:3, 3] - b[:3, 3]) for a, b in zip(piece.X_GO, piece.X_GO[1:])]
+            dR = [Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).magnitude() for a, b in zip(piece.X_GO, piece.X_GO[1:])]
+            assert max(dX, default=0) <= s.options.step_m + 1e-9 and max(dR, default=0) <= s.options.step_rad + 1e-9
+            assert s.closure(piece.p, piece.n) > 0
+            state_X = piece.X_GO[-1]
+        else:
+            assert isinstance(piece, Regrasp)
+            f = piece.finger
+            assert np.allclose(piece.before.X_GO, state_X) and np.allclose(piece.before.p, p)
+            assert s.holds(piece.before.p, piece.before.n, f)  # the others hold it
+            assert s.closure(piece.after.p, piece.after.n) > 0
+            others = [k for k in range(len(p)) if k != f]
+            assert np.allclose(piece.after.p[others], p[others])  # only finger f moved
+            fixed = [i for i in range(len(state_q)) if i not in set(s.hm.hand.finger_idx[f])]
+            assert np.allclose(piece.q[:, fixed], piece.q[0, fixed])  # only its joints
+            tips = s.hand.tips(s.kin, piece.q[-1])
+            assert np.abs(tips - tip_targets(s.X_WG @ state_X, piece.after.p, piece.after.n,
+                                             s.hand.radii)).max() < 3e-4
+        state_q, p = piece.q[-1], piece.end.p
+    return state_X
+
+
+def test_the_tree_turns_a_sphere_by_finger_gaiting(gs):
+    s = gs
+    rng = np.random.default_rng(0)
+    o = RoadmapOptions(nodes=150)
+    start = start_config(s, np.eye(4), rng, o)
+    assert start is not None and len(s.liftable(start)) == 4
+    goal = _goal(1.3, [1.0, 0.5, 0.2])
+    pieces, tree, stats = grow(s, start, goal, rng, o)
+    assert pieces is not None and stats.kept >= 2
+    end = _assert_feasible(s, pieces, start)
+    assert np.allclose(end, goal, atol=1e-9)
+    kinds = {type(p) for p in pieces}
+    assert kinds == {Transfer, Regrasp}  # it had to gait: the fingers alone cannot turn it 1.3 rad
+
+
+def test_a_gs_n_path_reduces_to_transfers_and_regrasps_near_it(gs):
+    s = gs
+    rng = np.random.default_rng(1)
+    start = start_config(s, np.eye(4), rng, RoadmapOptions())
+    X = step_towards(start.X_GO, _goal(1.0, [0, 1, 0]), 0.3, 0.01)
+    # the contacts slide to where the fingertips are once the sphere has turned
+    c_G = (inverse(s.X_WG) @ np.c_[s.hand.tips(s.kin, start.q), np.ones(4)].T)
+    tri, uv = s.surface.locate((inverse(X) @ c_G)[:3].T)
+    steps = gs_path(s, start, X, s.surface.points(tri, uv), rng)
+    assert steps
+    pieces = reduce_path(s, [start] + steps, rng)
+    assert pieces is not None
+    assert np.allclose(_assert_feasible(s, pieces, start), X)
+    assert np.abs(pieces[-1].end.p - steps[-1].p).max() < 0.004  # ends on the path's contacts
+
+
+def test_a_finger_that_the_others_cannot_spare_does_not_step(gs):
+    s = gs
+    rng = np.random.default_rng(2)
+    start = start_config(s, np.eye(4), rng, RoadmapOptions())
+    # three contacts on one side of the sphere cannot hold it: drop all but two fingers'
+    # support by moving them to the first finger's side, then no finger may step
+    p, n = start.p.copy(), start.n.copy()
+    p[1:3], n[1:3] = p[0], n[0]
+    weak = type(start)(start.X_GO, p, n, start.q, 0.0)
+    assert not s.holds(p, n, 3)
+    assert finger_step(s, weak, 3, start.p[3], start.n[3], rng) is None
