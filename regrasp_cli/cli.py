@@ -248,6 +248,32 @@ def plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, planne
              roadmap_nodes, grasp_target, style=style, sampler=sampler)
 
 
+@main.group()
+def inhand() -> None:
+    """In-hand manipulation: a hand reorients the object in its fingers (Saut et al., seed 003)."""
+
+
+@inhand.command("plan")
+@click.argument("scene", type=click.Path(path_type=Path))
+@click.option("-o", "--output", type=click.Path(path_type=Path), default=Path("plan.json"),
+              show_default=True, help="Where to write the plan JSON.")
+@seed_option()
+@click.option("--no-timings", is_flag=True,
+              help="Leave wall-clock times out of the plan, so that the same seed writes the same bytes.")
+@click.option("--no-check", is_flag=True, help="Skip the independent validation of the written plan.")
+@cache_option
+@click.pass_context
+def inhand_plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, no_timings: bool,
+                no_check: bool) -> None:
+    """Plan the finger gaits that turn the object held in the hand's fingertips from its
+    start to its goal pose (format regrasp.inhand/1); write the plan JSON.
+
+    Exits 0 when solved, 1 with the failing stage and reason when not."""
+    from regrasp_cli.commands.inhand import run_inhand_plan
+
+    run_inhand_plan(scene, ctx.obj["cache_dir"], output, seed, not no_timings, not no_check)
+
+
 @main.command()
 @click.argument("plan_file", metavar="PLAN", type=click.Path(path_type=Path))
 @click.option("--resolution", type=float, default=0.01, show_default=True,

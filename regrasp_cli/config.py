@@ -563,3 +563,79 @@ def _robot_conf(t: Fields, key: str) -> str | Mapping[str, float]:
         c = t.sub(key)
         return {str(k): c.float(k) for k in c.data}
     raise t.error(key, f"expected 'rest' or a mapping joint -> value (rad or m), found {v!r}")
+
+
+# --------------------------------------------------------------------------- inhand.yaml
+
+INHAND_FORMAT = "regrasp.inhand/1"
+
+
+@dataclass(frozen=True)
+class InhandPlanning:
+    """Options of the in-hand planner (seed 003): ``nodes`` the tree's budget of
+    expansions, ``step_rad`` the object's turn per edge, ``gait_m`` the contact drift
+    before a finger steps (metres, radians)."""
+
+    seed: int = 0
+    nodes: int = 300
+    step_rad: float = 0.35
+    gait_m: float = 0.012
+
+
+@dataclass(frozen=True)
+class InhandSpec:
+    """An in-hand problem (``format: regrasp.inhand/1``): the hand's wrist is fixed (the
+    robot at ``robot_config``, the hand open), poses are in the hand's grasp frame G."""
+
+    file: Path
+    robot: Path
+    hand: str  # "right" or "left": a hand of the robot.yaml
+    robot_config: str | Mapping[str, float]  # 'rest' or joint -> value: where the arm holds the wrist
+    object: ObjectSpec
+    X_GO_start: np.ndarray  # (4, 4) object start pose in G
+    X_GO_goal: np.ndarray  # (4, 4) object goal pose in G (its position the start's when not given)
+    start_grasp: Mapping[str, tuple[float, ...]] | None  # finger name -> contact point in O; None: find one
+    planning: InhandPlanning
+
+
+def load_inhand_spec(path: str | Path) -> InhandSpec:
+    """Read an in-hand scene; bad input raises InputError naming the file and field."""
+    file, data = read_yaml(path)
+    f = Fields(file, data)
+    f.only("format", "robot", "hand", "robot_config", "object", "object_start", "object_goal", "start_grasp",
+           "planning")
+    if f.str("format") != INHAND_FORMAT:
+        raise f.error("format", f"expected '{INHAND_FORMAT}', found {f.data['format']!r}")
+    value = f.str("robot")
+    robot = builtin_robot(file, "robot", value) if value.startswith(BUILTIN_PREFIX) else resolve_path(file, "robot", value)
+    hand = f.str("hand", "right")
+    if hand not in ("right", "left"):
+        raise f.error("hand", f"expected 'right' or 'left', found {hand!r}")
+    o = f.sub("object")
+    o.only("mesh", "scale", "friction")
+    mesh = o.str("mesh")
+    if not mesh.startswith("builtin:"):
+        mesh = str(resolve_path(file, "object.mesh", mesh))
+    obj = ObjectSpec(mesh, o.float("scale", 1.0, positive=True), o.float("friction", 0.8, positive=True,
+                                                                         maximum=MAX_FRICTION))
+    start = parse_pose(f, "object_start")
+    g = f.sub("object_goal")
+    g.only("xyz", "rpy", "quat")
+    xyz = {} if g.has("xyz") else {"xyz": [float(x) for x in start[:3, 3]]}  # the object turns where it is
+    goal = parse_pose(Fields(file, {"object_goal": {**g.data, **xyz}}), "object_goal")
+    grasp = None
+    v = f.data.get("start_grasp", "find")
+    if v != "find":
+        if not isinstance(v, dict) or not v:
+            raise f.error("start_grasp", f"expected 'find' or a mapping finger name -> contact point [x, y, z] "
+                                         f"in the object frame, found {v!r}")
+        s = f.sub("start_grasp")
+        grasp = {str(k): s.vector(k, 3) for k in s.data}
+    planning = InhandPlanning()
+    if f.has("planning"):
+        p = f.sub("planning")
+        p.only("seed", "nodes", "step_rad", "gait_m")
+        planning = InhandPlanning(p.int("seed", planning.seed, minimum=0), p.int("nodes", planning.nodes, minimum=1),
+                                  p.float("step_rad", planning.step_rad, positive=True, maximum=3.2),
+                                  p.float("gait_m", planning.gait_m, positive=True))
+    return InhandSpec(file, robot, hand, _robot_conf(f, "robot_config"), obj, start, goal, grasp, planning)

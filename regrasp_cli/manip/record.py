@@ -19,7 +19,8 @@ from regrasp_cli.store import atomic_write_bytes, sha256_bytes, sha256_file
 from regrasp_cli.trajectory import Phase, Placement, Plan, PlanGrasp
 
 
-def _rel(path: Path, base: Path) -> str:
+def relative_path(path: Path, base: Path) -> str:
+    """``path`` relative to ``base`` (absolute when on another drive)."""
     try:
         return os.path.relpath(Path(path).resolve(), base.resolve())
     except ValueError:  # another drive (Windows)
@@ -74,17 +75,17 @@ def make_plan(problem: Problem, lists: dict[str, GraspList], outcome: Outcome, o
     base = Path(out_file).resolve().parent
     mesh = export_object(problem, cache_dir)
     obstacles = tuple({"name": o.name, "shape": o.shape, "size": list(o.size), "pose": o.X_WO,
-                       "mesh": None if o.mesh is None else _rel(o.mesh, base)} for o in spec.obstacles)
+                       "mesh": None if o.mesh is None else relative_path(o.mesh, base)} for o in spec.obstacles)
     return Plan(
         status="failed" if outcome.failure else "solved",
         failure=None if outcome.failure is None else outcome.failure.as_dict(),
-        scene={"file": _rel(spec.file, base), "sha256": sha256_file(spec.file)},
-        robot={"urdf": _rel(robot.spec.urdf, base), "urdf_sha256": robot.urdf_sha256,
-               "robot_yaml": _rel(robot.spec.file, base), "robot_yaml_sha256": robot.robot_yaml_sha256},
+        scene={"file": relative_path(spec.file, base), "sha256": sha256_file(spec.file)},
+        robot={"urdf": relative_path(robot.spec.urdf, base), "urdf_sha256": robot.urdf_sha256,
+               "robot_yaml": relative_path(robot.spec.file, base), "robot_yaml_sha256": robot.robot_yaml_sha256},
         joint_names=robot.joint_names,
         limits={"lower": robot.lower, "upper": robot.upper, "velocity": robot.velocity,
                 "acceleration": np.full(robot.nq, options.acceleration)},
-        object={"name": problem.object.name, "mesh": _rel(mesh, base), "sha256": sha256_file(mesh),
+        object={"name": problem.object.name, "mesh": relative_path(mesh, base), "sha256": sha256_file(mesh),
                 "friction": spec.object.friction},
         obstacles=obstacles,
         collision={"contact_tolerance": problem.collision_options.contact_tolerance,

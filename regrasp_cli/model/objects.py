@@ -131,6 +131,22 @@ def _can() -> trimesh.Trimesh:
     return _upright(creation.cylinder(radius=0.02, height=0.11, sections=48))
 
 
+def _ball() -> trimesh.Trimesh:
+    """Ball of 3.5 cm radius (seed 003's sphere, sized for a hand), centred on the origin:
+    the in-hand objects are held in the fingers, never stood on a table."""
+    return creation.icosphere(subdivisions=3, radius=0.035)
+
+
+def _cube() -> trimesh.Trimesh:
+    """Cube of 5 cm sides, centred on the origin (in-hand)."""
+    return creation.box(extents=(0.05, 0.05, 0.05))
+
+
+def _roll() -> trimesh.Trimesh:
+    """Short cylinder, 2.5 cm radius and 6 cm long along z, centred on the origin (in-hand)."""
+    return creation.cylinder(radius=0.025, height=0.06, sections=32)
+
+
 def _upright(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """The mesh moved so the origin is the centre of its base footprint (minimum z = 0)."""
     mesh.apply_translation([0.0, 0.0, -mesh.bounds[0, 2]])
@@ -138,7 +154,7 @@ def _upright(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
 
 
 _BUILTINS: dict[str, Callable[[], trimesh.Trimesh]] = {"statuette": _statuette, "mug": _mug, "block": _block,
-                                                       "can": _can}
+                                                       "can": _can, "ball": _ball, "cube": _cube, "roll": _roll}
 
 
 def builtin_names() -> tuple[str, ...]:

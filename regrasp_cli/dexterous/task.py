@@ -1,0 +1,181 @@
+"""The in-hand task (seed 003): an ``regrasp.inhand/1`` scene loaded and planned.
+
+The hand's wrist is fixed (the robot at its ``robot_config``, the hand open), the object
+is held in its fingertips from the start pose, and the planner finds transfers and
+finger regrasps that bring it to the goal pose (:mod:`.roadmap`, :mod:`.gait`).  Poses
+are in the hand's grasp frame G.
+
+Input that cannot work is refused before planning with an :class:`InputError` naming the
+field: a hand with fewer than three fingertips, an object wider at its narrowest than the
+fingertips can open, a start grasp that is not force closure, a goal pose at which no
+grasp of the hand holds the object.  A planning failure names its stage: ``grasps`` (no
+force-closure grasp found at the start pose) or ``roadmap`` (the tree did not reach the
+goal within its budget).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from time import perf_counter
+
+import numpy as np
+
+from regrasp_cli.config import InhandSpec, load_inhand_spec
+from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp
+from regrasp_cli.dexterous.gsn import GsConfig, GsOptions, GsScratch
+from regrasp_cli.dexterous.hand import reach, tip_targets
+from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, rlg_sample, start_config
+from regrasp_cli.dexterous.surface import Surface
+from regrasp_cli.errors import InputError
+from regrasp_cli.grasp.single import HandModel
+from regrasp_cli.manip.status import PlanningFailed, Stage
+from regrasp_cli.grasp.surface import build_surface
+from regrasp_cli.grasp.workspace import hand_workspace
+from regrasp_cli.model.objects import ObjectMesh
+from regrasp_cli.model.robot import Kinematics, Robot, load_robot
+from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
+from regrasp_cli.scene import scene_object
+
+CONTACT_TOLERANCE = 0.002  # m: fingertip-object penetration allowed at a contact (as the grasp search)
+GOAL_PROBES = 40  # RLG samples at the goal pose before it is called unreachable
+
+
+@dataclass(frozen=True)
+class InhandProblem:
+    spec: InhandSpec
+    robot: Robot
+    object: ObjectMesh
+    disabled: DisabledPairs
+    q_fixed: np.ndarray  # (nq,) the robot holding the wrist, the hand open
+
+    @property
+    def hand(self) -> str:
+        return self.spec.hand
+
+
+def load_inhand_problem(path: str | Path, cache_dir: Path | None) -> InhandProblem:
+    spec = load_inhand_spec(path)
+    robot = load_robot(spec.robot)
+    if spec.hand not in robot.hands:
+        raise InputError(spec.file, "hand", f"{spec.robot} has no {spec.hand} hand (hands: "
+                                            f"{', '.join(robot.hands) or 'none'})")
+    h = robot.hands[spec.hand]
+    if len(h.finger_idx) < 3 or h.kind != "fingertips":
+        raise InputError(spec.file, "hand", f"the {spec.hand} hand has {len(h.finger_idx)} fingers with "
+                                            f"{h.kind} contacts; finger gaiting needs at least three fingertips")
+    obj = scene_object(spec)
+    if spec.robot_config == "rest":
+        q = robot.q_rest.copy()
+    else:
+        try:
+            q = robot.configuration(spec.robot_config, "robot_config")
+        except InputError as exc:
+            raise InputError(spec.file, exc.field, exc.message) from None
+    q[h.idx] = h.open
+    return InhandProblem(spec, robot, obj, disabled_pairs(robot, cache_dir), q)
+
+
+@dataclass
+class InhandOutcome:
+    pieces: list[Piece] = field(default_factory=list)
+    start: GsConfig | None = None
+    X_WG: np.ndarray = field(default_factory=lambda: np.eye(4))
+    failure: PlanningFailed | None = None
+    stats: dict = field(default_factory=dict)
+
+
+def scratch(problem: InhandProblem, cache_dir: Path | None, rng: np.random.Generator) -> GsScratch:
+    """What the planner checks GS_n with: the hand model with the object, the fingers'
+    workspaces, the surface sampled every half fingertip radius, the triangulated one."""
+    robot, hand = problem.robot, problem.hand
+    mesh = problem.object.mesh
+    hm = HandModel(robot, hand, mesh, problem.disabled.links(), CONTACT_TOLERANCE)
+    hm.q = problem.q_fixed.copy()
+    hm.X_WG = Kinematics(robot).fk(hm.q, robot.hands[hand].grasp_frame)
+    ws = hand_workspace(robot, hand, cache_dir=cache_dir)
+    tip = min(f.tip_radius for f in robot.hands[hand].spec.fingers)
+    sampled = build_surface(mesh, 0.5 * tip, rng)
+    rho = float(np.linalg.norm(mesh.vertices - sampled.mass_centre, axis=1).max())
+    return GsScratch(hm, ws, sampled, Surface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction))
+
+
+def _check_size(problem: InhandProblem, s: GsScratch) -> None:
+    """The object must fit between the fingertips: its narrowest extent (over the
+    principal axes of its hull) no wider than the farthest two fingertips can be apart."""
+    tips = [w.samples for w in s.workspaces]
+    span = max(float(np.linalg.norm(a[:, None] - b[None], axis=2).max())
+               for i, a in enumerate(tips) for b in tips[i + 1:])
+    narrowest = float(problem.object.mesh.convex_hull.bounding_box_oriented.extents.min())
+    if narrowest > span:
+        raise InputError(problem.spec.file, "object.mesh",
+                         f"{problem.object.name} is {narrowest:.3f} m across at its narrowest, wider than the "
+                         f"{problem.hand} hand's fingertips can open ({span:.3f} m apart at most)")
+
+
+def given_start(problem: InhandProblem, s: GsScratch, rng: np.random.Generator) -> GsConfig:
+    """The scene's start grasp: each finger's contact the surface point nearest the one
+    given, the fingers by IK; InputError when it cannot be, or is not force closure."""
+    spec, h = problem.spec, problem.robot.hands[problem.hand]
+    names = [f.name for f in h.spec.fingers]
+    given = dict(spec.start_grasp)
+    if set(given) != set(names):
+        raise InputError(spec.file, "start_grasp", f"expected a contact for each finger of the {problem.hand} hand "
+                                                   f"({', '.join(names)}), found {', '.join(given) or 'none'}")
+    tri, uv = s.surface.locate(np.array([given[n] for n in names], float))
+    p, n = s.surface.points(tri, uv), s.surface.normals[tri]
+    X_WO = s.X_WG @ spec.X_GO_start
+    q = reach(s.hand, s.hm.q, tip_targets(X_WO, p, n, s.hand.radii), rng, restarts=10, tol=s.options.tol)
+    if q is None:
+        raise InputError(spec.file, "start_grasp", "the fingertips cannot reach these contacts with the object at "
+                                                   "object_start")
+    if s.collides(spec.X_GO_start, q):
+        raise InputError(spec.file, "start_grasp", "with the fingertips on these contacts the hand collides with "
+                                                   "the object or itself")
+    eps = s.closure(p, n)
+    if eps <= 0:
+        raise InputError(spec.file, "start_grasp", f"these contacts do not hold the object: not force closure "
+                                                   f"with friction {spec.object.friction:g}")
+    return GsConfig(spec.X_GO_start.copy(), p, n, q, eps)
+
+
+def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> InhandOutcome:
+    """Plan the reorientation; the outcome's pieces bring the object to the goal pose, or
+    its failure names the stage."""
+    spec, o = problem.spec, problem.spec.planning
+    rng = np.random.default_rng(seed)
+    t0 = perf_counter()
+    s = scratch(problem, cache_dir, rng)
+    _check_size(problem, s)
+    options = RoadmapOptions(step_rad=o.step_rad, nodes=o.nodes)
+    out = InhandOutcome(X_WG=s.X_WG)
+    stages = {"setup": perf_counter() - t0}
+    t = perf_counter()
+    if not any(rlg_sample(s, spec.X_GO_goal, rng, options.candidates) for _ in range(GOAL_PROBES)):
+        raise InputError(spec.file, "object_goal", f"no grasp of the {problem.hand} hand holds the object at this "
+                                                   f"pose ({GOAL_PROBES} samples): the fingers cannot reach it there")
+    start = given_start(problem, s, rng) if spec.start_grasp else start_config(s, spec.X_GO_start, rng, options)
+    stages["start grasp"] = perf_counter() - t
+    if start is None:
+        out.failure = PlanningFailed(Stage.GRASPS, f"no force-closure grasp of the object at its start pose in "
+                                                   f"{options.start_samples} samples")
+        return _finish(out, s, stages, t0)
+    out.start = start
+    t = perf_counter()
+    pieces, tree, st = grow(s, start, spec.X_GO_goal, rng, options, GaitOptions(gait_m=o.gait_m))
+    stages["roadmap"] = perf_counter() - t
+    out.stats.update(nodes_kept=st.kept, iterations=st.iterations, start_liftable=st.start_liftable)
+    if pieces is None:
+        out.failure = PlanningFailed(Stage.ROADMAP, f"the GS_n tree did not reach the goal pose in {st.iterations} "
+                                                    f"expansions ({st.kept} nodes)")
+    else:
+        out.pieces = pieces
+    return _finish(out, s, stages, t0)
+
+
+def _finish(out: InhandOutcome, s: GsScratch, stages: dict, t0: float) -> InhandOutcome:
+    regrasps = sum(isinstance(p, Regrasp) for p in out.pieces)
+    out.stats.update(nodes_generated=s.generated, regrasps=regrasps, transfers=len(out.pieces) - regrasps,
+                     collision_checks=s.checks, gs_failures=dict(s.failures), stages_s=stages,
+                     planning_s=perf_counter() - t0)
+    return out
