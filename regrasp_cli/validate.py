@@ -31,6 +31,8 @@ its name:
   relative pose: those pairs are checked once, at the phase's first waypoint, not at every
   sample (they are the costliest: the object's mesh against fingertips in contact).
 
+An in-hand plan (task ``inhand``) gets the checks of :mod:`regrasp_cli.validate_inhand`.
+
 Malformed, incomplete or stale input raises :class:`~regrasp_cli.errors.InputError`;
 everything else wrong with the plan is an :class:`Issue` of the returned report.
 """
@@ -525,6 +527,10 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         return ValidationReport((Issue(None, None, "status", msg),), 0, {})
 
     inputs = load_inputs(plan, path)
+    if plan.task == "inhand":  # a hand turning the object in its fingers (seed 003)
+        from regrasp_cli.validate_inhand import validate_inhand
+
+        return validate_inhand(plan, path, inputs, resolution)
     robot, reach, kin = inputs.robot, joint_reach(inputs.robot), Kinematics(inputs.robot)
     issues = [Issue(None, None, "input", note) for note in inputs.notes]
     carries, poses = follow(path, plan, kin)

@@ -40,7 +40,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("model.*", "grasp.*", "placement.*", "scene", "motion.*"),
     ("roadmap.*",),
     ("trajectory", "replay", "artefacts"),
-    ("manip.*", "dexterous.*", "validate"),
+    ("manip.*", "dexterous.*", "validate", "validate_inhand"),
     ("show.*", "bench.*"),
     ("commands.*", "cli"),
 )
@@ -50,6 +50,9 @@ LAYER_NAMES = ("L0 core", "L1 model/grasp/scene/motion", "L2 roadmap", "L3 plan 
 # (importer, importer may not import this module or anything under it, unless it is one of these)
 FORBIDDEN: tuple[tuple[str, str, tuple[str, ...], str], ...] = (
     ("validate", "manip", ("manip.modes",), "the validator is independent of the planner"),
+    ("validate_inhand", "manip", ("manip.modes",), "the validator is independent of the planner"),
+    ("validate_inhand", "dexterous", (), "the validator is independent of the planner"),
+    ("validate", "dexterous", (), "the validator is independent of the planner"),
     ("show.*", "validate", (), "the viewer replays plans (replay.py) without the validator"),
 )
 

@@ -80,8 +80,7 @@ def _segment_free(s: GsScratch, q_a: np.ndarray, q_b: np.ndarray, finger: int, o
                   check_rad: float) -> bool:
     k = max(1, int(np.ceil(np.abs(q_b - q_a).max() / check_rad)))
     for t in np.linspace(0.0, 1.0, k + 1)[1:]:
-        s.checks += 1
-        if s.hm.collides(q_a + t * (q_b - q_a), others, finger):
+        if s.finger_collides(q_a + t * (q_b - q_a), finger, others):
             return False
     return True
 

@@ -29,8 +29,10 @@ Frames: the grasp frame G of the hand (fixed), the object frame O; metres, radia
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
+import pinocchio as pin
 
 from regrasp_cli.dexterous.contacts import closure, holds
 from regrasp_cli.dexterous.hand import InHand, reach, tip_targets
@@ -68,8 +70,10 @@ class GsScratch:
 
     def __init__(self, hm: HandModel, workspaces: tuple[FingerWorkspace, ...], sampled: SampledSurface,
                  surface: Surface, rho: float, options: GsOptions = GsOptions(),
-                 grasp: GraspOptions = GraspOptions()):
+                 grasp: GraspOptions = GraspOptions(), disabled: frozenset = frozenset()):
         self.hm, self.workspaces, self.sampled, self.surface = hm, workspaces, sampled, surface
+        self.disabled = disabled  # link pairs never checked (the robot's disabled collisions)
+        self.surface_mesh = surface.mesh
         self.rho, self.options, self.grasp = rho, options, grasp
         self.hand = InHand(hm.robot, hm.hand.side, hm.q.copy(), tuple(range(len(hm.hand.finger_idx))))
         self.X_WG = hm.X_WG
@@ -93,10 +97,38 @@ class GsScratch:
         """The fingers that may let go: the others still hold the object."""
         return tuple(f for f in range(len(c.p)) if self.holds(c.p, c.n, f))
 
+    @cached_property
+    def _exact(self) -> HandModel:
+        """The hand with fingertips not eroded: the hand model's fingertips are shrunk by
+        the contact tolerance so that they may touch the object, which must not let two
+        fingers overlap."""
+        hm = self.hm
+        disabled = {tuple(sorted(p)) for p in self.disabled}
+        return HandModel(hm.robot, hm.hand.side, self.surface_mesh, disabled, 0.0)
+
+    def _fingers_touch(self, q: np.ndarray, finger: int | None) -> bool:
+        """Do two fingers (or ``finger`` and another, or the palm) overlap at ``q``?"""
+        ex = self._exact
+        pin.updateGeometryPlacements(ex.robot.model, ex.data, ex.gm, ex.gd, ex.robot.to_pin(q))
+        for k, (fa, fb) in enumerate(ex.pair_fingers):
+            if fb is None or (finger is not None and finger not in (fa, fb)):
+                continue  # the object's pairs: the eroded model's business
+            if pin.computeCollision(ex.gm, ex.gd, k):
+                return True
+        return False
+
     def collides(self, X_GO: np.ndarray, q: np.ndarray) -> bool:
+        """The hand with the object at ``X_GO``: fingers or palm inside the object (beyond
+        the contact tolerance at the fingertips) or overlapping each other."""
         self.checks += 1
         self.hm.set_object(inverse(X_GO))
-        return self.hm.collides(q, set(range(len(self.hand.fingers))), None)
+        return self.hm.collides(q, set(range(len(self.hand.fingers))), None) or self._fingers_touch(q, None)
+
+    def finger_collides(self, q: np.ndarray, finger: int, others: set[int]) -> bool:
+        """Finger ``finger`` (moving, the object where the hand model has it) against the
+        object, the palm and the fingers ``others``."""
+        self.checks += 1
+        return self.hm.collides(q, others, finger) or self._fingers_touch(q, finger)
 
 
 def sample_config(s: GsScratch, X_GO: np.ndarray) -> GsConfig | None:

@@ -6,7 +6,8 @@ the object's pose (in the robot base frame W) and the fingertip contacts (finger
 point and outward normal in the object frame) at every waypoint: every finger during a
 transfer, every finger but the moving one while it is lifted in a regrasp.  Waypoints are
 joined by straight joint-space segments, each timed rest to rest within the joint limits
-(a stop at every waypoint: a fingertip leaves no contact between two).
+(a stop at every waypoint: a fingertip leaves no contact between two).  The ``start`` and
+``goal`` placements are the object's poses in the hand at the two ends (it never rests).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from regrasp_cli.manip.modes import Kind
 from regrasp_cli.manip.record import export_object, relative_path
 from regrasp_cli.motion.timing import segment_duration
 from regrasp_cli.store import sha256_file
-from regrasp_cli.trajectory import Phase, Plan
+from regrasp_cli.trajectory import Phase, Placement, Plan
 
 ACCELERATION = 2.0  # rad/s^2 of every joint (the fingers)
 
@@ -84,5 +85,6 @@ def make_inhand_plan(problem: InhandProblem, out: InhandOutcome, seed: int, out_
         obstacles=(),
         collision={"contact_tolerance": CONTACT_TOLERANCE, "support_tolerance": CONTACT_TOLERANCE,
                    "disabled_pairs": sorted(list(p) for p in problem.disabled.links())},
+        placements=(Placement("start", out.X_WG @ spec.X_GO_start), Placement("goal", out.X_WG @ spec.X_GO_goal)),
         phases=phases(problem, out) if out.failure is None else (),
         stats=stats, seed=seed, planner="gsn-tree", task="inhand")

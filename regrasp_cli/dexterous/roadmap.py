@@ -114,7 +114,7 @@ def rlg_sample(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, candida
             targets = np.zeros((n_f, 3))
             targets[f] = tip_targets(s.X_WG @ X_GO, p, n, s.hand.radii[f:f + 1])[0]
             q_try = reach(s.hand, _seed(s, q, f, near[k]), targets, rng, fingers=(f,), restarts=0, tol=s.options.tol)
-            if q_try is not None and not s.hm.collides(q_try, placed, f):
+            if q_try is not None and not s.finger_collides(q_try, f, placed):
                 q, points[f], normals[f] = q_try, p[0], n[0]
                 placed.add(f)
                 break

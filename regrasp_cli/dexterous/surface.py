@@ -56,12 +56,12 @@ class Surface:
         return tri, uv
 
     @cached_property
-    def _mesh(self) -> trimesh.Trimesh:
+    def mesh(self) -> trimesh.Trimesh:
         return trimesh.Trimesh(self.V, self.F, process=False)
 
     def locate(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The contacts nearest the points ``p`` (n, 3): (tri (n,), uv (n, 2))."""
-        _, _, tri = trimesh.proximity.closest_point(self._mesh, p)
+        _, _, tri = trimesh.proximity.closest_point(self.mesh, p)
         bary = trimesh.triangles.points_to_barycentric(self.V[self.F[tri]], p)
         return tri, bary[:, 1:]
 

@@ -97,7 +97,8 @@ def scratch(problem: InhandProblem, cache_dir: Path | None, rng: np.random.Gener
     tip = min(f.tip_radius for f in robot.hands[hand].spec.fingers)
     sampled = build_surface(mesh, 0.5 * tip, rng)
     rho = float(np.linalg.norm(mesh.vertices - sampled.mass_centre, axis=1).max())
-    return GsScratch(hm, ws, sampled, Surface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction))
+    return GsScratch(hm, ws, sampled, Surface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction),
+                     disabled=frozenset(problem.disabled.links()))
 
 
 def _check_size(problem: InhandProblem, s: GsScratch) -> None:

@@ -1,0 +1,236 @@
+"""Independent checks of an in-hand plan (task ``inhand``, seed 003): a hand turns the
+object held in its fingertips with ``inhand-transfer`` and ``inhand-regrasp`` phases.
+
+Like :mod:`regrasp_cli.validate` it trusts nothing the planner computed (it never imports
+it): it reloads the robot and the object mesh by the plan's hashes and checks, from the
+phases' kinds, per-waypoint object poses and contacts:
+
+* **continuity, timing, limits**: as for every plan (:mod:`regrasp_cli.validate`);
+* **kind**: only the touching hand's finger joints move (the wrist is fixed); in a
+  transfer no contact changes (each is fixed on the object) and every finger touches; in
+  a regrasp the object stays still, one finger leaves its contact (it is missing from the
+  waypoints between the first and the last), the others keep theirs, and all touch at
+  both ends;
+* **object**: the object's pose never jumps (at most ``step_m`` and ``step_rad`` between
+  waypoints, none between phases), starts at the ``start`` pose and ends at the ``goal``;
+* **contacts**, at every waypoint: on the object's surface, the normal along the
+  surface's, the fingertip sphere's centre at ``p + r n`` (within :data:`TIP_TOL`), and
+  force closure of the fingers in contact (n-1 while one steps; point contacts with the
+  plan's friction, the linearised cone of the grasp search); a lifted finger clear of the
+  object;
+* **collision**: every segment sampled (the object's pose interpolated with the joints)
+  against the hand itself and the object, fingertips touching it eroded by the plan's
+  contact tolerance.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from time import perf_counter
+
+import numpy as np
+import trimesh
+from scipy.spatial.transform import Rotation, Slerp
+
+from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
+from regrasp_cli.manip.modes import Kind
+from regrasp_cli.model.collision import ObjectPlacement, collision_world
+from regrasp_cli.model.robot import Kinematics
+from regrasp_cli.replay import Inputs
+from regrasp_cli.trajectory import Phase, Plan
+from regrasp_cli.validate import (CONE_EDGES, NORMAL_TOL, POSE_TOL, SURFACE_TOL, TIP_TOL, Issue, PhaseSummary,
+                                  ValidationReport, _pose_differs, _surface, continuity_issues, limit_issues,
+                                  timing_issues)
+
+STEP_M, STEP_RAD = 0.01, 0.1  # the object's largest move between two waypoints: more is a jump
+FINGER_TOL = 1e-9  # rad: joints that must not move
+
+
+def _contact_set(phase: Phase, i: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    return {c["finger"]: (np.asarray(c["point"], float), np.asarray(c["normal"], float)) for c in phase.contacts[i]}
+
+
+def _same(a: dict, b: dict) -> bool:
+    return a.keys() == b.keys() and all(np.allclose(a[f][0], b[f][0], atol=1e-9) for f in a)
+
+
+class _Checker:
+    def __init__(self, plan: Plan, inputs: Inputs):
+        self.plan, self.inputs = plan, inputs
+        self.robot, self.kin, self.mesh = inputs.robot, Kinematics(inputs.robot), inputs.mesh
+        self.centre = np.asarray(self.mesh.center_mass if self.mesh.is_watertight else self.mesh.centroid, float)
+        self.rho = float(np.linalg.norm(self.mesh.vertices - self.centre, axis=1).max())
+        self.closure: dict[bytes, bool] = {}
+        self.surface: dict[bytes, str | None] = {}
+
+    def fingers(self, hand: str) -> dict[str, int]:
+        return {f.name: j for j, f in enumerate(self.robot.hands[hand].spec.fingers)}
+
+    def holds(self, contacts: dict) -> bool:
+        p = np.array([v[0] for v in contacts.values()])
+        n = np.array([v[1] / np.linalg.norm(v[1]) for v in contacts.values()])
+        key = p.tobytes() + n.tobytes()
+        if key not in self.closure:
+            W = primitive_wrenches(p, n, self.inputs.friction, self.centre, self.rho, n_edges=CONE_EDGES)
+            self.closure[key] = len(p) >= 2 and bool(force_closure(W)[0])
+        return self.closure[key]
+
+    def on_surface(self, f: str, p: np.ndarray, n: np.ndarray) -> str | None:
+        key = p.tobytes() + n.tobytes()
+        if key not in self.surface:
+            d, normals = _surface(self.mesh, p)
+            u = float(np.linalg.norm(n))
+            msg = None
+            if d > SURFACE_TOL:
+                msg = f"the {f} contact is {d * 1000:.3g} mm off the object's surface"
+            elif abs(u - 1) > 1e-3:
+                msg = f"the {f} contact normal has norm {u:.4g}, not 1"
+            elif np.arccos(np.clip((normals @ (n / u)).max(), -1, 1)) > NORMAL_TOL:
+                msg = f"the {f} contact normal is off the surface normal"
+            self.surface[key] = msg
+        return self.surface[key]
+
+    def phase_issues(self, phase: Phase, previous: Phase | None) -> list[Issue]:
+        out: list[Issue] = []
+        if not phase.kind.inhand or len(phase.touching) != 1 or phase.holding:
+            return [Issue(phase.name, None, "kind", f"an in-hand plan has only inhand-transfer and inhand-regrasp "
+                                                    f"phases touching one hand; found a {phase.kind.value} phase")]
+        if phase.contacts is None or phase.object_poses is None:
+            return [Issue(phase.name, None, "kind", "an in-hand phase needs object_poses and contacts at every "
+                                                    "waypoint")]
+        hand = self.robot.hands[phase.touching[0]]
+        names = self.fingers(phase.touching[0])
+        q, X = phase.waypoints, phase.object_poses
+        fixed = np.setdiff1d(np.arange(self.robot.nq), hand.idx)
+        if np.abs(q[:, fixed] - q[0, fixed]).max(initial=0.0) > FINGER_TOL:
+            out.append(Issue(phase.name, None, "kind", "joints other than the hand's fingers move (the wrist is "
+                                                       "fixed in an in-hand plan)"))
+        if previous is not None and previous.object_poses is not None and \
+                (off := _pose_differs(previous.object_poses[-1], X[0])):
+            out.append(Issue(phase.name, 0, "continuity", f"the object jumps by {off} from the end of phase "
+                                                          f"{previous.name}"))
+        for i in range(1, len(X)):
+            dp = float(np.linalg.norm(X[i, :3, 3] - X[i - 1, :3, 3]))
+            dr = float(Rotation.from_matrix(X[i - 1, :3, :3].T @ X[i, :3, :3]).magnitude())
+            if dp > STEP_M or dr > STEP_RAD:
+                out.append(Issue(phase.name, i, "continuity", f"the object jumps by {dp * 1000:.3g} mm, {dr:.3g} rad "
+                                                              f"from waypoint {i - 1}"))
+                break
+        sets = [_contact_set(phase, i) for i in range(len(q))]
+        out += self._kind_contacts(phase, sets, names, q, hand)
+        out += self._contacts(phase, sets, names, q, X, hand)
+        return out
+
+    def _kind_contacts(self, phase: Phase, sets: list[dict], names: dict, q: np.ndarray, hand) -> list[Issue]:
+        out = []
+        everyone = set(names)
+        if phase.kind is Kind.INHAND_TRANSFER:
+            for i, c in enumerate(sets):
+                if set(c) != everyone:
+                    out.append(Issue(phase.name, i, "kind", f"in a transfer every finger touches; missing "
+                                                            f"{', '.join(sorted(everyone - set(c)))}"))
+                    break
+                if not _same(c, sets[0]):
+                    out.append(Issue(phase.name, i, "kind", "a contact moves on the object during a transfer"))
+                    break
+            return out
+        if _pose_differs(phase.object_poses[0], phase.object_poses[-1]) or any(
+                _pose_differs(phase.object_poses[0], x) for x in phase.object_poses):
+            out.append(Issue(phase.name, None, "kind", "the object moves during a regrasp"))
+        if set(sets[0]) != everyone or set(sets[-1]) != everyone:
+            out.append(Issue(phase.name, 0, "kind", "a regrasp starts and ends with every finger touching"))
+            return out
+        lifted = {f for c in sets[1:-1] for f in everyone - set(c)}
+        if len(lifted) != 1 or any(set(c) != everyone - lifted for c in sets[1:-1]):
+            out.append(Issue(phase.name, None, "kind", "in a regrasp exactly one finger leaves the object between "
+                                                       "the first and the last waypoints"))
+            return out
+        f = lifted.pop()
+        stay = everyone - {f}
+        for i, c in enumerate(sets[1:], 1):
+            if any(not np.allclose(c[g][0], sets[0][g][0], atol=1e-9) for g in stay):
+                out.append(Issue(phase.name, i, "kind", f"a finger other than {f} changes its contact in its regrasp"))
+                break
+        others = np.setdiff1d(hand.idx, hand.finger_idx[names[f]])
+        if np.abs(q[:, others] - q[0, others]).max(initial=0.0) > FINGER_TOL:
+            out.append(Issue(phase.name, None, "kind", f"fingers other than {f} move during its regrasp"))
+        return out
+
+    def _contacts(self, phase: Phase, sets: list[dict], names: dict, q: np.ndarray, X: np.ndarray,
+                  hand) -> list[Issue]:
+        out = []
+        for i, c in enumerate(sets):
+            for f, (p, n) in c.items():
+                if f not in names:
+                    return [Issue(phase.name, i, "grasp", f"contact of unknown finger {f!r}")]
+                if msg := self.on_surface(f, p, n):
+                    return [Issue(phase.name, i, "grasp", msg)]
+                j = names[f]
+                target = X[i, :3, :3] @ (p + hand.spec.fingers[j].tip_radius * n / np.linalg.norm(n)) + X[i, :3, 3]
+                d = float(np.linalg.norm(self.kin.fk(q[i], hand.tip_frames[j])[:3, 3] - target))
+                if d > TIP_TOL:
+                    return [Issue(phase.name, i, "grasp", f"the {f} fingertip is {d * 1000:.3g} mm from its contact")]
+            if not self.holds(c):
+                return [Issue(phase.name, i, "grasp", f"the contacts of {', '.join(sorted(c))} are not force closure "
+                                                      f"(friction {self.inputs.friction:g})")]
+            for f in set(names) - set(c):  # a lifted finger touches nothing
+                j = names[f]
+                centre = self.kin.fk(q[i], hand.tip_frames[j])[:3, 3]
+                c_O = (np.linalg.inv(X[i]) @ np.r_[centre, 1.0])[:3]
+                clear = -float(trimesh.proximity.signed_distance(self.mesh, c_O[None])[0])
+                if clear < hand.spec.fingers[j].tip_radius - self.inputs.options.contact_tolerance:
+                    return [Issue(phase.name, i, "grasp", f"the lifted {f} fingertip touches the object")]
+        return out
+
+    def collisions(self, phase: Phase, resolution: float) -> tuple[list[Issue], int]:
+        q, X = phase.waypoints, phase.object_poses
+        obj = ObjectPlacement(self.mesh, X[0], None, tuple(phase.touching))
+        world = collision_world(self.robot, self.inputs.obstacles, self.inputs.disabled, obj, self.inputs.options)
+        n = 0
+        for i in range(len(q)):
+            steps = 1 if i == 0 else max(1, int(np.ceil(np.abs(q[i] - q[i - 1]).max() / resolution)))
+            slerp = None if i == 0 else Slerp([0, 1], Rotation.from_matrix(X[i - 1:i + 1, :3, :3]))
+            for s in np.arange(1, steps + 1) / steps:
+                qs = q[i] if i == 0 else q[i - 1] + s * (q[i] - q[i - 1])
+                Xs = X[i].copy()
+                if i:
+                    Xs[:3, :3] = slerp([s]).as_matrix()[0]
+                    Xs[:3, 3] = (1 - s) * X[i - 1, :3, 3] + s * X[i, :3, 3]
+                world.set_object_pose(Xs)
+                n += 1
+                if not world.is_free(qs):
+                    pairs = ", ".join(f"{a}-{b}" for a, b in world.colliding_pairs(qs)[:3])
+                    return [Issue(phase.name, i, "collision", f"collision ({pairs}) between waypoints {max(i - 1, 0)} "
+                                                              f"and {i}")], n
+        return [], n
+
+
+def validate_inhand(plan: Plan, path: Path, inputs: Inputs, resolution: float) -> ValidationReport:
+    """Check the in-hand plan ``plan`` read from ``path`` (see the module docstring)."""
+    ch = _Checker(plan, inputs)
+    issues = [Issue(None, None, "input", note) for note in inputs.notes]
+    summaries, seconds = [], {}
+    for k, phase in enumerate(plan.phases):
+        t0 = perf_counter()
+        previous = plan.phases[k - 1] if k else None
+        found = continuity_issues(phase, previous, ch.robot.joint_names)
+        found += timing_issues(phase, previous, inputs.velocity, inputs.acceleration)
+        found += limit_issues(phase, ch.robot.joint_names, inputs.lower, inputs.upper)
+        found += ch.phase_issues(phase, previous)
+        hits, n = ch.collisions(phase, resolution) if phase.object_poses is not None else ([], 0)
+        issues += found + hits
+        dt = perf_counter() - t0
+        seconds[phase.name] = seconds.get(phase.name, 0.0) + dt
+        summaries.append(PhaseSummary(phase.name, phase.kind.value, len(phase.waypoints), n, dt))
+    for pid, k, i in (("start", 0, 0), ("goal", -1, -1)):
+        placement = plan.placement(pid)
+        if placement is None:
+            issues.append(Issue(None, None, "attachment", f"an in-hand plan records the object's {pid} pose in "
+                                                          f"placements[] (id {pid!r})"))
+        elif plan.phases and plan.phases[k].object_poses is not None and \
+                (off := _pose_differs(plan.phases[k].object_poses[i], placement.X_WO)):
+            issues.append(Issue(plan.phases[k].name, None, "attachment", f"the object is {off} away from its {pid} "
+                                                                         "pose"))
+    if not plan.phases:
+        issues.append(Issue(None, None, "status", "a solved in-hand plan has at least one phase"))
+    return ValidationReport(tuple(issues), sum(s.configurations for s in summaries), seconds, tuple(summaries))
