@@ -70,10 +70,8 @@ class GsScratch:
 
     def __init__(self, hm: HandModel, workspaces: tuple[FingerWorkspace, ...], sampled: SampledSurface,
                  surface: Surface, rho: float, options: GsOptions = GsOptions(),
-                 grasp: GraspOptions = GraspOptions(), disabled: frozenset = frozenset()):
+                 grasp: GraspOptions = GraspOptions()):
         self.hm, self.workspaces, self.sampled, self.surface = hm, workspaces, sampled, surface
-        self.disabled = disabled  # link pairs never checked (the robot's disabled collisions)
-        self.surface_mesh = surface.mesh
         self.rho, self.options, self.grasp = rho, options, grasp
         self.hand = InHand(hm.robot, hm.hand.side, hm.q.copy(), tuple(range(len(hm.hand.finger_idx))))
         self.X_WG = hm.X_WG
@@ -103,8 +101,7 @@ class GsScratch:
         the contact tolerance so that they may touch the object, which must not let two
         fingers overlap."""
         hm = self.hm
-        disabled = {tuple(sorted(p)) for p in self.disabled}
-        return HandModel(hm.robot, hm.hand.side, self.surface_mesh, disabled, 0.0)
+        return HandModel(hm.robot, hm.hand.side, self.surface.mesh, set(hm.disabled_links), 0.0)
 
     def _fingers_touch(self, q: np.ndarray, finger: int | None) -> bool:
         """Do two fingers (or ``finger`` and another, or the palm) overlap at ``q``?"""

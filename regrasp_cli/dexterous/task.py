@@ -97,8 +97,7 @@ def scratch(problem: InhandProblem, cache_dir: Path | None, rng: np.random.Gener
     tip = min(f.tip_radius for f in robot.hands[hand].spec.fingers)
     sampled = build_surface(mesh, 0.5 * tip, rng)
     rho = float(np.linalg.norm(mesh.vertices - sampled.mass_centre, axis=1).max())
-    return GsScratch(hm, ws, sampled, Surface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction),
-                     disabled=frozenset(problem.disabled.links()))
+    return GsScratch(hm, ws, sampled, Surface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction))
 
 
 def _check_size(problem: InhandProblem, s: GsScratch) -> None:
@@ -152,10 +151,11 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
     out = InhandOutcome(X_WG=s.X_WG)
     stages = {"setup": perf_counter() - t0}
     t = perf_counter()
+    given = given_start(problem, s, rng) if spec.start_grasp else None
     if not any(rlg_sample(s, spec.X_GO_goal, rng, options.candidates) for _ in range(GOAL_PROBES)):
         raise InputError(spec.file, "object_goal", f"no grasp of the {problem.hand} hand holds the object at this "
                                                    f"pose ({GOAL_PROBES} samples): the fingers cannot reach it there")
-    start = given_start(problem, s, rng) if spec.start_grasp else start_config(s, spec.X_GO_start, rng, options)
+    start = given or start_config(s, spec.X_GO_start, rng, options)
     stages["start grasp"] = perf_counter() - t
     if start is None:
         out.failure = PlanningFailed(Stage.GRASPS, f"no force-closure grasp of the object at its start pose in "

@@ -70,6 +70,7 @@ class HandModel:
 
     def __init__(self, robot: Robot, hand: str, mesh, disabled_links: set[tuple[str, str]], tolerance: float):
         self.robot, self.hand = robot, robot.hands[hand]
+        self.disabled_links = frozenset(disabled_links)  # link pairs never checked
         h = self.hand
         model = robot.model
         self.q = robot.q_rest.copy()

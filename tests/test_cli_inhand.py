@@ -1,0 +1,122 @@
+"""`regrasp inhand plan` end to end on the shipped ball scene (seed 003's experiment with
+`builtin:hand4`), `regrasp validate` accepting the plan and rejecting it when a regrasp
+breaks force closure, a fingertip leaves the surface or the object jumps, and bad input
+(a start grasp that does not hold, an object too big for the hand, an unreachable goal)
+as one line with exit code 2 and no plan written."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from cli_helpers import assert_one_error_line, needs_separate_stderr, run, write_scene
+from conftest import ROOT
+
+from regrasp_cli.dexterous.contacts import closure
+from regrasp_cli.validate import validate_plan
+
+SCENE = ROOT / "regrasp_cli" / "data" / "scenes" / "inhand_ball.yaml"
+
+
+def _scene(**changes) -> dict:
+    d = yaml.safe_load(SCENE.read_text())
+    d["robot"] = "builtin:hand4"
+    d.update(changes)
+    return d
+
+
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory, cache_dir):
+    tmp = tmp_path_factory.mktemp("inhand")
+    out = tmp / "plan.json"
+    result = run("--cache-dir", cache_dir, "inhand", "plan", SCENE, "-o", out, "--no-timings")
+    assert result.exit_code == 0, result.output
+    return out, json.loads(out.read_text())
+
+
+def test_the_ball_is_turned_by_finger_gaits_and_the_plan_is_valid(planned):
+    out, d = planned
+    kinds = [p["kind"] for p in d["phases"]]
+    assert set(kinds) == {"inhand-transfer", "inhand-regrasp"} and d["task"] == "inhand"
+    goal = np.array(d["placements"][1]["pose"])
+    assert np.allclose(d["phases"][-1]["object_poses"][-1], goal, atol=1e-9)
+    assert d["stats"]["regrasps"] == kinds.count("inhand-regrasp") > 0
+    assert validate_plan(out).valid
+
+
+def _tampered(tmp_path, d, edit) -> list:
+    d = copy.deepcopy(d)
+    edit(d)
+    path = tmp_path / "tampered.json"
+    path.write_text(json.dumps(d))
+    return validate_plan(path).issues
+
+
+def _first(d, kind):
+    return next(p for p in d["phases"] if p["kind"] == kind and len(p["waypoints"]) >= 3)
+
+
+def test_validate_rejects_a_regrasp_that_lets_the_object_go(tmp_path, planned):
+    out, d = planned
+
+    def edit(d):  # a second finger lifts while one steps: two contacts cannot hold a ball
+        p = _first(d, "inhand-regrasp")
+        for c in p["contacts"][1:-1]:
+            c.pop(0)
+    issues = _tampered(tmp_path, d, edit)
+    assert any(i.check == "grasp" and "not force closure" in i.message for i in issues)
+
+
+def test_validate_rejects_a_fingertip_off_the_surface(tmp_path, planned):
+    out, d = planned
+
+    def edit(d):
+        p = _first(d, "inhand-transfer")
+        for c in p["contacts"]:
+            c[0]["point"] = list(np.array(c[0]["point"]) + 0.005 * np.array(c[0]["normal"]))
+    issues = _tampered(tmp_path, d, edit)
+    assert any(i.check == "grasp" and "off the object's surface" in i.message for i in issues)
+
+
+def test_validate_rejects_an_object_that_jumps(tmp_path, planned):
+    out, d = planned
+
+    def edit(d):
+        p = _first(d, "inhand-transfer")
+        p["object_poses"][1][2][3] += 0.02
+    issues = _tampered(tmp_path, d, edit)
+    assert any(i.check == "continuity" and "jumps" in i.message for i in issues)
+
+
+@needs_separate_stderr
+def test_a_start_grasp_that_does_not_hold_is_one_line(tmp_path, cache_dir, planned):
+    _, d = planned
+    start = {c["finger"]: [float(x) for x in c["point"]] for c in d["phases"][0]["contacts"][0]}
+    p = np.array(list(start.values()))
+    n = p / np.linalg.norm(p, axis=1, keepdims=True)  # a ball's normals
+    assert closure(p, n, 0.1, np.zeros(3), 0.035) == 0.0  # the planned start, with less friction
+    scene = write_scene(tmp_path / "s.yaml", _scene(start_grasp=start, object={"mesh": "builtin:ball",
+                                                                               "friction": 0.1}))
+    result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "p.json")
+    assert_one_error_line(result, str(scene), "start_grasp", "not force closure")
+    assert not (tmp_path / "p.json").exists()
+
+
+@needs_separate_stderr
+def test_an_object_too_big_for_the_hand_is_one_line(tmp_path, cache_dir):
+    scene = write_scene(tmp_path / "s.yaml", _scene(object={"mesh": "builtin:ball", "scale": 5.0}))
+    result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "p.json")
+    assert_one_error_line(result, str(scene), "object.mesh", "wider than")
+    assert not (tmp_path / "p.json").exists()
+
+
+@needs_separate_stderr
+def test_a_goal_out_of_the_fingers_reach_is_one_line(tmp_path, cache_dir):
+    scene = write_scene(tmp_path / "s.yaml", _scene(object_goal={"xyz": [0.0, 0.0, 0.3], "rpy": [0, 0, 0]}))
+    result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "p.json")
+    assert_one_error_line(result, str(scene), "object_goal", "cannot reach")
+    assert not (tmp_path / "p.json").exists()
