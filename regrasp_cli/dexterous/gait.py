@@ -150,7 +150,10 @@ def _transfer_step(s: GsScratch, state: GsConfig, X_GO: np.ndarray, rng: np.rand
                    o: GaitOptions) -> GsConfig | None:
     q = reach(s.hand, state.q, tip_targets(s.X_WG @ X_GO, state.p, state.n, s.hand.radii), rng, restarts=0,
               tol=s.options.tol)
-    if q is None or np.abs(q - state.q).max() > o.max_joint_step or s.collides(X_GO, q):
+    why = ("transfer ik" if q is None else "transfer joint step" if np.abs(q - state.q).max() > o.max_joint_step
+           else "transfer collision" if s.collides(X_GO, q) else None)
+    if why is not None:
+        s.failures[why] = s.failures.get(why, 0) + 1
         return None
     return GsConfig(X_GO, state.p, state.n, q, state.eps)
 
@@ -221,7 +224,8 @@ def _transfer(states: list[GsConfig]) -> Transfer:
 def carry(s: GsScratch, a: GsConfig, X_GO: np.ndarray, rng: np.random.Generator, step_m: float, step_rad: float,
           o: GaitOptions = GaitOptions()) -> Transfer | None:
     """The transfer of the object from ``a`` to ``X_GO`` (4, 4) with ``a``'s contacts, every
-    step checked (IK, joint step, collisions), or None."""
+    step checked (IK, joint step, collisions), or None.  (Keeping the part that goes, an
+    RRT's extend, filled the tree with stretched fingers near the goal: docs/DESIGN-NOTES.md.)"""
     states = [a]
     for X in interpolate(a.X_GO, X_GO, step_m, step_rad)[1:]:
         nxt = _transfer_step(s, states[-1], X, rng, o)

@@ -33,6 +33,7 @@ from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
+import trimesh
 
 from regrasp_cli.dexterous.contacts import closure, holds
 from regrasp_cli.dexterous.hand import InHand, reach, tip_targets
@@ -94,6 +95,17 @@ class GsScratch:
     def liftable(self, c: GsConfig) -> tuple[int, ...]:
         """The fingers that may let go: the others still hold the object."""
         return tuple(f for f in range(len(c.p)) if self.holds(c.p, c.n, f))
+
+    @cached_property
+    def clear(self) -> np.ndarray:
+        """(m,) bool per sampled surface point: a fingertip touching the surface there
+        touches it there only (its sphere, of the largest tip radius, clear of the rest of
+        the mesh to 0.5 mm): not across an edge or inside a crease, where the object's
+        least turn would push into the fingertip."""
+        r = float(self.hand.radii.max())
+        c = self.sampled.points + r * self.sampled.normals
+        _, d, _ = trimesh.proximity.closest_point(self.surface.mesh, c)
+        return d >= r - 5e-4
 
     @cached_property
     def _exact(self) -> HandModel:

@@ -36,6 +36,11 @@ from regrasp_cli.dexterous.hand import reach, tip_targets
 from regrasp_cli.spatial import inverse
 
 
+FACING = 0.2  # cosine: a fingertip closes on its contact within 78 deg of its normal, as the grasp
+# search asks (0.5 kept the cube's distal links off its faces a little more often, but halved
+# the ball's successes: docs/DESIGN-NOTES.md)
+
+
 @dataclass(frozen=True)
 class RoadmapOptions:
     step_rad: float = 0.35  # object rotation per edge
@@ -78,16 +83,17 @@ class Tree:
 
 def _candidates(s: GsScratch, X_GO: np.ndarray, f: int) -> tuple[np.ndarray, np.ndarray]:
     """Contact candidates of finger ``f`` with the object at ``X_GO``: indices (c,) of
-    surface samples whose fingertip centre lies in the finger's workspace and whose normal
-    faces the closing fingertip, and the nearest workspace sample of each (c,)."""
+    surface samples whose fingertip centre lies in the finger's workspace, where the
+    fingertip touches the surface only at the contact (:attr:`GsScratch.clear`) and whose
+    normal faces the closing fingertip, and the nearest workspace sample of each (c,)."""
     ws, r = s.workspaces[f], s.hand.radii[f]
     c_G = (s.sampled.points + r * s.sampled.normals) @ X_GO[:3, :3].T + X_GO[:3, 3]
-    inside = np.nonzero(s.hm.voxels(s.workspaces)[f].lookup(c_G) >= 0)[0]
+    inside = np.nonzero((s.hm.voxels(s.workspaces)[f].lookup(c_G) >= 0) & s.clear)[0]
     if inside.size == 0:
         return inside, inside
     near = ws.tree.query(c_G[inside])[1]
     n_G = s.sampled.normals[inside] @ X_GO[:3, :3].T
-    facing = -np.einsum("ij,ij->i", n_G, ws.sample_closing[near]) > 0.2
+    facing = -np.einsum("ij,ij->i", n_G, ws.sample_closing[near]) > FACING
     return inside[facing], near[facing]
 
 
