@@ -120,3 +120,18 @@ def test_a_goal_out_of_the_fingers_reach_is_one_line(tmp_path, cache_dir):
     result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "p.json")
     assert_one_error_line(result, str(scene), "object_goal", "cannot reach")
     assert not (tmp_path / "p.json").exists()
+
+
+@needs_separate_stderr
+@pytest.mark.parametrize("changes, words", [
+    ({"hand": "left"}, ("hand", "no left hand")),
+    ({"robot": "builtin:hironx"}, ("hand", "three fingertips")),
+    ({"object_goal": {"rpy": [0, 0]}}, ("object_goal.rpy", "3 numbers")),
+    ({"start_grasp": "somehow"}, ("start_grasp", "'find'")),
+    ({"planning": {"nodes": 0}}, ("planning.nodes", ">= 1")),
+])
+def test_bad_scene_fields_are_one_line(tmp_path, cache_dir, changes, words):
+    scene = write_scene(tmp_path / "s.yaml", _scene(**changes))
+    result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "p.json")
+    assert_one_error_line(result, str(scene), *words)
+    assert not (tmp_path / "p.json").exists()
