@@ -38,7 +38,7 @@ from regrasp_cli.model.collision import ObjectPlacement, collision_world
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.replay import Inputs
 from regrasp_cli.trajectory import Phase, Plan
-from regrasp_cli.validate import (CONE_EDGES, NORMAL_TOL, POSE_TOL, SURFACE_TOL, TIP_TOL, Issue, PhaseSummary,
+from regrasp_cli.validate import (CONE_EDGES, NORMAL_TOL, SURFACE_TOL, TIP_TOL, Issue, PhaseSummary,
                                   ValidationReport, _pose_differs, _surface, continuity_issues, limit_issues,
                                   timing_issues)
 

@@ -29,9 +29,9 @@ from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, rlg_sample, star
 from regrasp_cli.dexterous.surface import Surface
 from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.single import HandModel
-from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.grasp.surface import build_surface
 from regrasp_cli.grasp.workspace import hand_workspace
+from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.model.objects import ObjectMesh
 from regrasp_cli.model.robot import Kinematics, Robot, load_robot
 from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
