@@ -20,6 +20,7 @@ from pathlib import Path
 from time import perf_counter
 
 import numpy as np
+from scipy.spatial import ConvexHull
 
 from regrasp_cli.config import InhandSpec, load_inhand_spec
 from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp
@@ -103,7 +104,7 @@ def scratch(problem: InhandProblem, cache_dir: Path | None, rng: np.random.Gener
 def _check_size(problem: InhandProblem, s: GsScratch) -> None:
     """The object must fit between the fingertips: its narrowest extent (over the
     principal axes of its hull) no wider than the farthest two fingertips can be apart."""
-    tips = [w.samples for w in s.workspaces]
+    tips = [w.samples[ConvexHull(w.samples).vertices] for w in s.workspaces]  # the farthest are on the hulls
     span = max(float(np.linalg.norm(a[:, None] - b[None], axis=2).max())
                for i, a in enumerate(tips) for b in tips[i + 1:])
     narrowest = float(problem.object.mesh.convex_hull.bounding_box_oriented.extents.min())
