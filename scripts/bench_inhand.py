@@ -97,6 +97,8 @@ def run(item: dict, out: Path, cache_dir: Path) -> dict:
                        reason=None if report.valid else str(report.issues[0]))
     except RegraspError as exc:  # input refused: a failure of the run, with its one line
         rec.update(solved=False, stage="input", reason=str(exc))
+    except Exception as exc:  # noqa: BLE001 - a crash is a failed run, recorded, not the end of the suite
+        rec.update(solved=False, stage="crash", reason=repr(exc))
     rec["total_s"] = time.perf_counter() - t0
     return rec
 

@@ -163,6 +163,9 @@ def gs_path(s: GsScratch, a: GsConfig, b_pose: np.ndarray, b_p: np.ndarray, rng:
     for f in moving:
         tri, uv = s.surface.locate(np.stack([a.p[f], b_p[f]]))
         paths[f] = geodesic(s.surface, (int(tri[0]), int(tri[1])), (uv[0], uv[1]))
+        if paths[f] is None:
+            s.failures["geodesic"] = s.failures.get("geodesic", 0) + 1
+            return None
     travel = max([float(np.linalg.norm(np.diff(pth, axis=0), axis=1).sum()) for pth in paths.values()] + [0.0])
     poses = interpolate(a.X_GO, b_pose, o.step_m, o.step_rad)
     k = max(len(poses) - 1, int(np.ceil(travel / o.step_m)))

@@ -185,12 +185,16 @@ def step_towards(X_a: np.ndarray, X_b: np.ndarray, step_rad: float, step_m: floa
 
 def slide(s: GsScratch, a: GsConfig, X_new: np.ndarray, rng: np.random.Generator,
           g: GaitOptions) -> list[Piece] | None:
-    """The GS_n path from ``a`` to the object at ``X_new``, each contact sliding to the
-    surface point nearest its fingertip there, reduced to transfers and regrasps; None when
-    a step fails (:func:`gsn.gs_path`) or the reduction does (:func:`gait.reduce_path`)."""
+    """The GS_n path from ``a`` to the object at ``X_new``, each contact of a finger that
+    may let go sliding to the surface point nearest its fingertip there (the others keep
+    theirs: a thumb opposing three fingers), reduced to transfers and regrasps; None when a
+    step fails (:func:`gsn.gs_path`) or the reduction does (:func:`gait.reduce_path`)."""
     centres_G = inverse(s.X_WG) @ np.c_[s.hand.tips(s.kin, a.q), np.ones(len(a.p))].T
     tri, uv = s.surface.locate((inverse(X_new) @ centres_G)[:3].T)
-    steps = gs_path(s, a, X_new, s.surface.points(tri, uv), rng)
+    b_p = s.surface.points(tri, uv)
+    fixed = tuple(f for f in range(len(a.p)) if f not in s.liftable(a))
+    b_p[list(fixed)] = a.p[list(fixed)]
+    steps = gs_path(s, a, X_new, b_p, rng, fixed)
     if not steps:
         return None
     return reduce_path(s, [a] + steps, rng, g)

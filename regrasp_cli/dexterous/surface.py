@@ -66,9 +66,10 @@ class Surface:
         return tri, bary[:, 1:]
 
 
-def geodesic(s: Surface, tri: tuple[int, int], uv: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+def geodesic(s: Surface, tri: tuple[int, int], uv: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
     """The surface path from contact ``(tri[0], uv[0])`` to ``(tri[1], uv[1])``: (k, 3)
-    points, the first and last the contacts, each segment inside one triangle."""
+    points, the first and last the contacts, each segment inside one triangle; None where
+    the mesh is not manifold (the solver's requirement)."""
     p = s.points(np.asarray(tri), np.asarray(uv, float).reshape(2, 2))
     if tri[0] == tri[1]:
         return p
@@ -86,7 +87,10 @@ def geodesic(s: Surface, tri: tuple[int, int], uv: tuple[np.ndarray, np.ndarray]
         p[k] = w @ s.V[F[t]]
     V2 = np.vstack([V, p])
     F2 = np.vstack([F[keep], np.array(new_faces)])
-    path = pp3d.EdgeFlipGeodesicSolver(V2, F2).find_geodesic_path(ids[0], ids[1])
+    try:
+        path = pp3d.EdgeFlipGeodesicSolver(V2, F2).find_geodesic_path(ids[0], ids[1])
+    except RuntimeError:  # geometry-central refuses a mesh that is not manifold there (scans)
+        return None
     return np.asarray(path, float)
 
 
