@@ -474,16 +474,8 @@ def load_scene_spec(path: str | Path) -> SceneSpec:
     f.only("format", "robot", "object", "obstacles", "task", "planning", "supports")
     if f.str("format") != SCENE_FORMAT:
         raise f.error("format", f"expected '{SCENE_FORMAT}', found {f.data['format']!r}")
-    value = f.str("robot")
-    robot = builtin_robot(file, "robot", value) if value.startswith(BUILTIN_PREFIX) else resolve_path(file, "robot", value)
-
-    o = f.sub("object")
-    o.only("mesh", "scale", "friction")
-    mesh = o.str("mesh")
-    if not mesh.startswith("builtin:"):
-        mesh = str(resolve_path(file, "object.mesh", mesh))
-    obj = ObjectSpec(mesh, o.float("scale", 1.0, positive=True),
-                     o.float("friction", 0.5, positive=True, maximum=MAX_FRICTION))
+    robot = _robot_path(f)
+    obj = _object(f, 0.5)
 
     raw = f.data.get("obstacles", []) or []
     if not isinstance(raw, list):
@@ -510,6 +502,25 @@ def load_scene_spec(path: str | Path) -> SceneSpec:
             ik_restarts=p.int("ik_restarts", planning.ik_restarts, minimum=1),
         )
     return SceneSpec(file, robot, obj, obstacles, task, planning, _supports(f, obstacles))
+
+
+def _robot_path(f: Fields) -> Path:
+    """``robot``: ``builtin:NAME`` or a robot.yaml path relative to the file."""
+    value = f.str("robot")
+    return builtin_robot(f.file, "robot", value) if value.startswith(BUILTIN_PREFIX) else \
+        resolve_path(f.file, "robot", value)
+
+
+def _object(f: Fields, friction: float) -> ObjectSpec:
+    """``object``: ``mesh`` (``builtin:NAME`` or a path relative to the file), ``scale``,
+    ``friction`` (default ``friction``)."""
+    o = f.sub("object")
+    o.only("mesh", "scale", "friction")
+    mesh = o.str("mesh")
+    if not mesh.startswith("builtin:"):
+        mesh = str(resolve_path(f.file, "object.mesh", mesh))
+    return ObjectSpec(mesh, o.float("scale", 1.0, positive=True),
+                      o.float("friction", friction, positive=True, maximum=MAX_FRICTION))
 
 
 def _supports(f: Fields, obstacles: tuple[ObstacleSpec, ...]) -> tuple[str, ...] | None:
@@ -606,18 +617,11 @@ def load_inhand_spec(path: str | Path) -> InhandSpec:
            "planning")
     if f.str("format") != INHAND_FORMAT:
         raise f.error("format", f"expected '{INHAND_FORMAT}', found {f.data['format']!r}")
-    value = f.str("robot")
-    robot = builtin_robot(file, "robot", value) if value.startswith(BUILTIN_PREFIX) else resolve_path(file, "robot", value)
+    robot = _robot_path(f)
     hand = f.str("hand", "right")
     if hand not in ("right", "left"):
         raise f.error("hand", f"expected 'right' or 'left', found {hand!r}")
-    o = f.sub("object")
-    o.only("mesh", "scale", "friction")
-    mesh = o.str("mesh")
-    if not mesh.startswith("builtin:"):
-        mesh = str(resolve_path(file, "object.mesh", mesh))
-    obj = ObjectSpec(mesh, o.float("scale", 1.0, positive=True), o.float("friction", 0.8, positive=True,
-                                                                         maximum=MAX_FRICTION))
+    obj = _object(f, 0.8)  # fingertips: rubber on the object
     start = parse_pose(f, "object_start")
     g = f.sub("object_goal")
     g.only("xyz", "rpy", "quat")

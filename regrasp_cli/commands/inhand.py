@@ -10,17 +10,15 @@ from rich.console import Console
 
 from regrasp_cli.dexterous.record import make_inhand_plan
 from regrasp_cli.dexterous.task import load_inhand_problem, plan_inhand
-from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.store import check_writable
 from regrasp_cli.trajectory import write_plan
 
 
 def run_inhand_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, timings: bool, check: bool,
                     console: Console | None = None) -> int:
-    """The `inhand plan` command; returns 0 when solved, raises PlanningFailed (exit 1)
-    when not."""
-    from regrasp_cli.commands.validate import print_validation
-    from regrasp_cli.validate import validate_plan
+    """The `inhand plan` command; returns 0 when solved, raises the outcome's
+    PlanningFailed (exit 1) when not."""
+    from regrasp_cli.commands.validate import check_written
 
     console = console or Console()
     check_writable(out_file, "--output")
@@ -43,10 +41,6 @@ def run_inhand_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | No
     console.print(f"motion of {plan.duration:.1f} s: {st['transfers']} transfers, {st['regrasps']} finger regrasps "
                   f"(gaits), {sum(len(p.waypoints) for p in plan.phases)} waypoints")
     if check:
-        report = validate_plan(out_file)
-        print_validation(report, console)
-        if not report.valid:
-            raise PlanningFailed(Stage.VALIDATION, f"the written plan fails {len(report.issues)} check(s); first: "
-                                 f"{report.issues[0]}")
+        check_written(out_file, console)
     console.print(f"plan: {out_file}")
     return 0

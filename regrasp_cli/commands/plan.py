@@ -64,8 +64,7 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
              timings: bool, check: bool, roadmap_nodes: int = RoadmapOptions.nodes, grasp_target: int | None = None,
              console: Console | None = None, style: str = "auto", sampler: str = "faces") -> int:
     """The `plan` command; returns the exit code (0 solved, 1 not)."""
-    from regrasp_cli.commands.validate import print_validation
-    from regrasp_cli.validate import validate_plan
+    from regrasp_cli.commands.validate import check_written
 
     console = console or Console()
     check_writable(out_file, "--output")  # before the work, not after it
@@ -105,10 +104,6 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
         raise outcome.failure
     print_summary(plan, outcome, console)
     if check:
-        report = validate_plan(out_file)
-        print_validation(report, console)
-        if not report.valid:
-            raise PlanningFailed(Stage.VALIDATION, f"the written plan fails {len(report.issues)} check(s); first: "
-                                 f"{report.issues[0]}")
+        check_written(out_file, console)
     console.print(f"plan: {out_file}")
     return 0
