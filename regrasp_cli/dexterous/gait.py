@@ -125,7 +125,6 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     if eps <= 0:
         return None
     X_WO = s.X_WG @ c.X_GO
-    r = s.hand.radii[f]
     others = set(range(len(p))) - {f}
     s.hm.set_object(np.linalg.inv(c.X_GO))
     seed = c.q.copy()  # the other fingers stay; finger f from the hint
@@ -192,8 +191,6 @@ def reduce_path(s: GsScratch, path: list[GsConfig], rng: np.random.Generator,
 def _backoff(synced: int, last: int) -> list[int]:
     """Path indices to try a gait at, from ``last`` back towards ``synced`` (excluded)."""
     out, j = [], last
-    if last == synced:
-        return []
     while j > synced:
         out.append(j)
         j = synced + (j - synced) // 2

@@ -81,6 +81,7 @@ class GsScratch:
         self.checks = 0  # collision checks
         self.generated = 0  # configurations generated (samples and edge ends)
         self.failures: dict[str, int] = {}  # why GS_n paths failed, per check
+        self._liftable: dict[bytes, tuple[int, ...]] = {}
 
     def closure(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> float:
         if without is not None:
@@ -93,8 +94,12 @@ class GsScratch:
         return holds(p, n, self.options.friction, self.centre, self.rho)
 
     def liftable(self, c: GsConfig) -> tuple[int, ...]:
-        """The fingers that may let go: the others still hold the object."""
-        return tuple(f for f in range(len(c.p)) if self.holds(c.p, c.n, f))
+        """The fingers that may let go: the others still hold the object (memoised per
+        set of contacts: a tree node is asked at each of its expansions)."""
+        key = c.p.tobytes() + c.n.tobytes()
+        if key not in self._liftable:
+            self._liftable[key] = tuple(f for f in range(len(c.p)) if self.holds(c.p, c.n, f))
+        return self._liftable[key]
 
     @cached_property
     def clear(self) -> np.ndarray:
