@@ -9,10 +9,12 @@ generated and nodes kept (the paper's 105 and 21), transfers and finger gaits.  
 object starts with its bounding box centred in the hand's grasp frame.  ``OUT/summary.md``
 has the table per object: success, median time and IQR, node counts, gaits.
 
-The suite (``format: regrasp.inhand-bench/1``): ``name``; ``hand`` (a robot.yaml, or
-``builtin:hand4``), ``side`` (default right); ``objects`` (each ``{mesh, scale, friction,
-label}``, paths relative to the suite file; ``optional: true`` skips a missing file);
-``goals`` (runs per object, default 20); ``nodes`` (the tree's budget, default 300).
+The suite (``format: regrasp.inhand-bench/1``): ``name``; ``hands`` (each ``{robot,
+side, label, objects}``: a robot.yaml path or ``builtin:NAME``, the hand's side (default
+right), and the labels of the objects it is given, default all); ``objects`` (each
+``{mesh, scale, friction, label}``, paths relative to the suite file; ``optional: true``
+skips a missing file); ``goals`` (runs per hand and object, default 20); ``nodes`` (the
+tree's budget, default 300).
 """
 
 from __future__ import annotations
@@ -42,10 +44,20 @@ def runs_of(suite_file: Path, out: Path) -> list[dict]:
     file, d = read_yaml(suite_file)
     if d.get("format") != "regrasp.inhand-bench/1":
         sys.exit(f"{file}: format: expected 'regrasp.inhand-bench/1'")
-    hand, side = d["hand"], d.get("side", "right")
     goals, nodes = int(d.get("goals", 20)), int(d.get("nodes", 300))
     runs = []
-    for o in d["objects"]:
+    for h in d["hands"]:
+        hand = h["robot"] if h["robot"].startswith("builtin:") else str((file.parent / h["robot"]).resolve())
+        label = h.get("label", Path(hand).stem)
+        objects = [o for o in d["objects"] if h.get("objects") is None or o["label"] in h["objects"]]
+        runs += _hand_runs(file, out, hand, h.get("side", "right"), label, objects, goals, nodes)
+    return runs
+
+
+def _hand_runs(file: Path, out: Path, hand: str, side: str, hand_label: str, objects: list[dict],
+               goals: int, nodes: int) -> list[dict]:
+    runs = []
+    for o in objects:
         mesh = o["mesh"]
         if not mesh.startswith("builtin:"):
             path = (file.parent / mesh).resolve()
@@ -61,18 +73,17 @@ def runs_of(suite_file: Path, out: Path) -> list[dict]:
         for k in range(goals):
             rng = np.random.default_rng(k)
             rpy = Rotation.random(random_state=rng).as_euler("xyz")
-            scene = {"format": "regrasp.inhand/1", "robot": hand if hand.startswith("builtin:")
-                     else str((file.parent / hand).resolve()), "hand": side,
+            scene = {"format": "regrasp.inhand/1", "robot": hand, "hand": side,
                      "object": {"mesh": mesh, "scale": float(o.get("scale", 1.0)),
                                 "friction": float(o.get("friction", 0.8))},
                      "object_start": {"xyz": [float(-x) for x in centre]},
                      "object_goal": {"rpy": [float(x) for x in rpy]},
                      "planning": {"seed": k, "nodes": nodes}}
-            path = out / "scenes" / f"{label}-{k:02d}.yaml"
+            path = out / "scenes" / f"{hand_label}-{label}-{k:02d}.yaml"
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_text(yaml.safe_dump(scene, sort_keys=False))
             angle = float(Rotation.from_euler("xyz", rpy).magnitude())
-            runs.append({"object": label, "goal": k, "scene": str(path), "goal_angle_rad": angle})
+            runs.append({"hand": hand_label, "object": label, "goal": k, "scene": str(path), "goal_angle_rad": angle})
     return runs
 
 
@@ -104,10 +115,10 @@ def run(item: dict, out: Path, cache_dir: Path) -> dict:
 
 
 def summary(records: list[dict]) -> str:
-    lines = ["| object | solved (valid) | median planning (s) | IQR (s) | generated (median) | kept (median) | "
-             "gaits (median) | transfers (median) | failures |", "|---|---|---|---|---|---|---|---|---|"]
-    for obj in dict.fromkeys(r["object"] for r in records):
-        rs = [r for r in records if r["object"] == obj]
+    lines = ["| hand | object | solved (valid) | median planning (s) | IQR (s) | generated (median) | kept (median) | "
+             "gaits (median) | transfers (median) | failures |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for hand, obj in dict.fromkeys((r["hand"], r["object"]) for r in records):
+        rs = [r for r in records if (r["hand"], r["object"]) == (hand, obj)]
         ok = [r for r in rs if r["solved"]]
         t = np.array([r["planning_s"] for r in rs if "planning_s" in r])
         med = lambda k: f"{np.median([r[k] for r in ok]):.0f}" if ok else "–"  # noqa: E731
@@ -115,7 +126,7 @@ def summary(records: list[dict]) -> str:
         for r in rs:
             if not r["solved"]:
                 fails[r["stage"]] = fails.get(r["stage"], 0) + 1
-        lines.append(f"| {obj} | {len(ok)}/{len(rs)} | {np.median(t):.2f} | "
+        lines.append(f"| {hand} | {obj} | {len(ok)}/{len(rs)} | {np.median(t):.2f} | "
                      f"{np.percentile(t, 25):.2f}–{np.percentile(t, 75):.2f} | {med('nodes_generated')} | "
                      f"{med('nodes_kept')} | {med('regrasps')} | {med('transfers')} | "
                      f"{', '.join(f'{k} {v}' for k, v in fails.items()) or '–'} |")
@@ -128,19 +139,19 @@ def main() -> None:
     ap.add_argument("-o", "--output", type=Path, default=Path("bench-inhand"))
     ap.add_argument("--cache-dir", type=Path, default=Path("cache"))
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--only", help="run only this object label")
+    ap.add_argument("--only", help="run only this hand's or object's label")
     a = ap.parse_args()
     a.output.mkdir(parents=True, exist_ok=True)
-    items = [r for r in runs_of(a.suite, a.output) if a.only in (None, r["object"])]
-    if items:  # build the shared artefacts (workspace, self-collision pairs) once, before the workers
-        load_inhand_problem(items[0]["scene"], a.cache_dir)
+    items = [r for r in runs_of(a.suite, a.output) if a.only in (None, r["hand"], r["object"])]
+    for first in {r["hand"]: r for r in items}.values():  # each hand's artefacts (workspace,
+        load_inhand_problem(first["scene"], a.cache_dir)   # self-collision pairs) before the workers
     records = []
     with open(a.output / "runs.jsonl", "w") as f:
         for rec in Parallel(n_jobs=a.jobs, return_as="generator")(delayed(run)(i, a.output, a.cache_dir) for i in items):
             records.append(rec)
             f.write(json.dumps(rec) + "\n")
             f.flush()
-            print(f"{rec['object']} goal {rec['goal']}: {'solved' if rec['solved'] else rec['stage']} "
+            print(f"{rec['hand']} {rec['object']} goal {rec['goal']}: {'solved' if rec['solved'] else rec['stage']} "
                   f"in {rec['total_s']:.1f} s", flush=True)
     (a.output / "summary.md").write_text(summary(records))
     print(summary(records))

@@ -30,7 +30,7 @@ from regrasp_cli.model.robot import Kinematics, Robot
 from regrasp_cli.spatial import inverse
 from regrasp_cli.store import Provenance, is_fresh, read_artefact, sha256_params, write_artefact
 
-FORMAT, FORMAT_VERSION = "regrasp.workspace", 4
+FORMAT, FORMAT_VERSION = "regrasp.workspace", 5  # 5: redundant fingers fix their trailing joints when the leading leave a plane
 
 
 @dataclass(frozen=True)
@@ -117,18 +117,22 @@ def _grid_counts(lo: np.ndarray, hi: np.ndarray, counts) -> np.ndarray:
 
 
 def _envelope_positions(robot: Robot, hand: str, finger: int, base: np.ndarray, lo: np.ndarray,
-                        hi: np.ndarray, total: int, spacing: float, max_per_axis: int = 1000) -> np.ndarray:
-    """Fingertip positions (e, 3) in G on the envelope: one joint (after the fixed ``base``
-    ones) at a limit, the others on a grid of about ``total`` points in all, refined per
-    axis until neighbouring positions are at most ``spacing`` apart.
+                        hi: np.ndarray, total: int, spacing: float, order: np.ndarray,
+                        max_per_axis: int = 1000) -> np.ndarray:
+    """Fingertip positions (e, 3) in G on the envelope: one free joint at a limit, the
+    others on a grid of about ``total`` points in all, refined per axis until neighbouring
+    positions are at most ``spacing`` apart.  Joint values are (fixed ``base``, free) in
+    the finger's joints permuted by ``order`` (:func:`_fixed_first`).
 
     A joint-space grid alone leaves Cartesian gaps where a joint has a long lever (an
     extended finger's proximal joint): Algorithm 1's radius, the distance to the nearest E
     point, then overestimates the distance to the workspace boundary by up to half a gap,
     and a sphere reaches out of the workspace (by 4 mm with the default robot's thumb)."""
     d = len(lo)
+    back = np.argsort(order)
     if d == 1:
-        return tip_positions(robot, hand, finger, np.column_stack([np.tile(base, (2, 1)), [lo[0], hi[0]]]))
+        q = np.column_stack([np.tile(base, (2, 1)), [lo[0], hi[0]]])
+        return tip_positions(robot, hand, finger, q[:, back])
     per_face = max(4, total // (2 * d))
     n0 = max(2, int(round(per_face ** (1.0 / (d - 1)))))
     out = []
@@ -141,7 +145,7 @@ def _envelope_positions(robot: Robot, hand: str, finger: int, base: np.ndarray, 
                 q = np.empty((len(g), d))
                 q[:, others] = g
                 q[:, j] = limit
-                P = tip_positions(robot, hand, finger, np.hstack([np.tile(base, (len(q), 1)), q]))
+                P = tip_positions(robot, hand, finger, np.hstack([np.tile(base, (len(q), 1)), q])[:, back])
                 P3 = P.reshape(*counts, 3)
                 need = list(counts)
                 for a in range(d - 1):
@@ -226,24 +230,49 @@ def fit_spheres(W: np.ndarray, E: np.ndarray, k_max: int, r_min: float) -> tuple
     return np.array(centres).reshape(-1, 3), np.array(radii)
 
 
+def _fixed_first(robot: Robot, hand: str, finger: int, n_fixed: int) -> np.ndarray:
+    """The finger's joints (positions in its chain) ordered with the ``n_fixed`` to fix
+    first: the leading ones (a thumb's base), unless the others then move the tip in a
+    plane only (an Allegro finger's three flexions after its abduction): then the
+    trailing ones.  Judged by the rank of the free joints' tip Jacobian at mid-range."""
+    n = len(robot.hands[hand].finger_idx[finger])
+    leading = np.arange(n)
+    if n_fixed == 0:
+        return leading
+    idx = robot.hands[hand].finger_idx[finger]
+    mid = (robot.lower[idx] + robot.upper[idx]) / 2
+    h = 1e-4
+    Q = np.vstack([mid, mid + h * np.eye(n)])
+    P = tip_positions(robot, hand, finger, Q)
+    J = (P[1:] - P[0]).T / h  # (3, n)
+    free = J[:, n_fixed:]
+    sv = np.linalg.svd(free, compute_uv=False)
+    if sv[-1] > 1e-3 * sv[0]:
+        return leading
+    return np.concatenate([np.arange(n - n_fixed, n), np.arange(n - n_fixed)])
+
+
 def finger_workspace(robot: Robot, hand: str, finger: int, options: WorkspaceOptions) -> FingerWorkspace:
     """Algorithm 1 for one finger.  A finger with more than three joints (a thumb with a
-    base joint) has a redundant chain whose "envelope" grid also covers its interior, so
-    its leading joints are fixed at a few values (limits and middle) and the spheres of
-    each fixed value are pooled, biggest first."""
+    base joint, an Allegro finger) has a redundant chain whose "envelope" grid also covers
+    its interior, so some joints are fixed at a few values (limits and middle;
+    :func:`_fixed_first`) and the spheres of each fixed value are pooled, biggest first."""
     h = robot.hands[hand]
     idx = h.finger_idx[finger]
-    lo, hi = robot.lower[idx], robot.upper[idx]
     n_base = max(0, len(idx) - 3)
-    bases = _grid(lo[:n_base], hi[:n_base], 3 ** n_base) if n_base else np.empty((1, 0))
+    order = _fixed_first(robot, hand, finger, n_base)
+    back = np.argsort(order)
+    lo, hi = robot.lower[idx], robot.upper[idx]
+    lo_p, hi_p = lo[order], hi[order]  # fixed joints first
+    bases = _grid(lo_p[:n_base], hi_p[:n_base], 3 ** n_base) if n_base else np.empty((1, 0))
     centres, radii, W_all, Q_all, D_all = [], [], [], [], []
     # closing: every joint moves away from its open value towards its far limit
     # (flexions curl, a gripper jaw moves towards the other; abduction stays put)
     open_ = robot.hands[hand].open[sum(len(i) for i in h.finger_idx[:finger]):][: len(idx)]
     closing = np.sign((lo + hi) / 2 - open_) * (hi - lo > 0)
     for b in bases:
-        Qw = _grid(lo[n_base:], hi[n_base:], options.interior_samples // len(bases))
-        Qw = np.hstack([np.tile(b, (len(Qw), 1)), Qw])
+        Qw = _grid(lo_p[n_base:], hi_p[n_base:], options.interior_samples // len(bases))
+        Qw = np.hstack([np.tile(b, (len(Qw), 1)), Qw])[:, back]
         W, hit = tip_positions(robot, hand, finger, Qw, with_collisions=True)
         # configurations where the finger runs into the palm are outside the usable
         # workspace: they join the envelope, so no sphere contains them
@@ -258,9 +287,9 @@ def finger_workspace(robot: Robot, hand: str, finger: int, options: WorkspaceOpt
             order = np.argsort(np.abs(Qw[:, 0] - (lo[0] + hi[0]) / 2))[: options.k_max]
             c, r = W[order], np.full(len(order), options.r_min)
         else:
-            E = np.concatenate([_envelope_positions(robot, hand, finger, b, lo[n_base:], hi[n_base:],
+            E = np.concatenate([_envelope_positions(robot, hand, finger, b, lo_p[n_base:], hi_p[n_base:],
                                                     options.envelope_samples // len(bases),
-                                                    options.envelope_spacing), blocked])
+                                                    options.envelope_spacing, order), blocked])
             c, r = fit_spheres(W, E, options.k_max, options.r_min)
         centres.append(c)
         radii.append(r)

@@ -6,6 +6,8 @@ fit_spheres on a case known on paper (a solid ball), and the HDF5 cache."""
 from __future__ import annotations
 
 from dataclasses import fields
+from importlib.resources import files
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +15,7 @@ import pytest
 from regrasp_cli.grasp import workspace as ws_mod
 from regrasp_cli.grasp.workspace import WorkspaceOptions, fit_spheres, hand_workspace, tip_positions
 from regrasp_cli.model.ik import IKOptions, solve_position
-from regrasp_cli.model.robot import Kinematics
+from regrasp_cli.model.robot import Kinematics, load_robot
 
 HAND = "right"
 OPTIONS = WorkspaceOptions()
@@ -188,3 +190,39 @@ def test_other_options_are_not_served_from_the_cache(robot, fingers, ws_cache, m
         hand_workspace(robot, HAND, WorkspaceOptions(k_max=5), ws_cache)
     assert calls
     assert {f.name for f in fields(WorkspaceOptions)} >= {"interior_samples", "envelope_samples", "k_max", "r_min"}
+
+
+# --------------------------------------------------------------------- redundant fingers
+
+ALLEGRO = files("regrasp_cli") / "data/robots/allegro/robot.yaml"
+
+
+def test_a_finger_whose_flexions_share_a_plane_fixes_its_last_joint_and_keeps_a_volume():
+    """An Allegro finger: abduction, then three flexions about parallel axes.  Fixing its
+    first joint (as for a thumb's base) leaves a plane and no sphere; the distal joint is
+    fixed instead, and every sphere's centre and 0.9 r probes are reached by the tip."""
+    allegro = load_robot(Path(str(ALLEGRO)))
+    assert list(ws_mod._fixed_first(allegro, HAND, 0, 1)) == [3, 0, 1, 2]
+    w = ws_mod.finger_workspace(allegro, HAND, 0, OPTIONS)
+    assert len(w.radii) >= 10 and w.radii.min() >= OPTIONS.r_min
+    h = allegro.hands[HAND]
+    idx, tip = h.finger_idx[0], h.tip_frames[0]
+    q0 = allegro.q_rest.copy()
+    q0[h.idx] = h.open
+    X_WG = Kinematics(allegro).fk(q0, h.grasp_frame)
+    rng = np.random.default_rng(0)
+    for c, r in zip(w.centres, w.radii):
+        for probe in PROBES:
+            p_G = c + r * probe
+            q = q0.copy()
+            q[idx] = w.sample_q[w.nearest(p_G)]
+            res = solve_position(allegro, tip, X_WG[:3, :3] @ p_G + X_WG[:3, 3], q, idx, rng, IKOptions(restarts=5))
+            assert res.position_error < 1e-3, (c, r, probe)
+
+
+def test_a_thumb_with_a_base_joint_keeps_fixing_its_first_joint(robot):
+    """The default robot's thumb: its base joint first, the other three span a volume."""
+    h = robot.hands[HAND]
+    thumb = next(i for i, f in enumerate(h.spec.fingers) if len(f.joints) > 3)
+    assert list(ws_mod._fixed_first(robot, HAND, thumb, len(h.spec.fingers[thumb].joints) - 3)) == \
+        list(range(len(h.spec.fingers[thumb].joints)))
