@@ -50,11 +50,10 @@ class Transfer:
     q: np.ndarray
     p: np.ndarray  # (n, 3) contacts, object frame
     n: np.ndarray  # (n, 3) outward normals
-    eps: float  # their force-closure epsilon
 
     @property
     def end(self) -> GsConfig:
-        return GsConfig(self.X_GO[-1], self.p, self.n, self.q[-1], self.eps)
+        return GsConfig(self.X_GO[-1], self.p, self.n, self.q[-1])
 
 
 @dataclass(frozen=True)
@@ -117,13 +116,10 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     outward normal ``n_new`` (object frame), or None: the others must hold the object, the
     new grasp be force closure, the finger reach it and move there without collision.
     ``q_hint``: joint values near the new contact's (an IK seed)."""
-    if not s.holds(c.p, c.n, f):
+    if not s.holds(c.p, c.n, f):  # then the new grasp holds too: it has one contact more
         return None
     p, n = c.p.copy(), c.n.copy()
     p[f], n[f] = p_new, n_new
-    eps = s.closure(p, n)
-    if eps <= 0:
-        return None
     X_WO = s.X_WG @ c.X_GO
     others = set(range(len(p))) - {f}
     s.hm.set_object(np.linalg.inv(c.X_GO))
@@ -141,7 +137,7 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
             continue
         qs = [c.q, up_a, up_b, down]
         if all(_segment_free(s, a, b, f, others, o.check_rad) for a, b in zip(qs, qs[1:])):
-            return Regrasp(f, np.array(qs), c, GsConfig(c.X_GO, p, n, down, eps))
+            return Regrasp(f, np.array(qs), c, GsConfig(c.X_GO, p, n, down))
     return None
 
 
@@ -154,7 +150,7 @@ def _transfer_step(s: GsScratch, state: GsConfig, X_GO: np.ndarray, rng: np.rand
     if why is not None:
         s.failures[why] = s.failures.get(why, 0) + 1
         return None
-    return GsConfig(X_GO, state.p, state.n, q, state.eps)
+    return GsConfig(X_GO, state.p, state.n, q)
 
 
 def reduce_path(s: GsScratch, path: list[GsConfig], rng: np.random.Generator,
@@ -215,7 +211,7 @@ def _step_fingers(s: GsScratch, state: GsConfig, target: GsConfig, rng: np.rando
 
 def _transfer(states: list[GsConfig]) -> Transfer:
     c = states[0]
-    return Transfer(np.array([x.X_GO for x in states]), np.array([x.q for x in states]), c.p, c.n, c.eps)
+    return Transfer(np.array([x.X_GO for x in states]), np.array([x.q for x in states]), c.p, c.n)
 
 
 def carry(s: GsScratch, a: GsConfig, X_GO: np.ndarray, rng: np.random.Generator, step_m: float, step_rad: float,

@@ -61,7 +61,6 @@ class GsConfig:
     p: np.ndarray  # (n, 3) contacts, object frame
     n: np.ndarray  # (n, 3) outward normals there
     q: np.ndarray  # (nq,) robot configuration (fingers set)
-    eps: float  # force-closure epsilon of the n contacts (NaN between a GS_n path's ends: not computed)
 
 
 class GsScratch:
@@ -88,9 +87,10 @@ class GsScratch:
             p, n = np.delete(p, without, axis=0), np.delete(n, without, axis=0)
         return closure(p, n, self.options.friction, self.centre, self.rho)
 
-    def holds(self, p: np.ndarray, n: np.ndarray, without: int) -> bool:
-        """Do the contacts but finger ``without``'s hold the object (force closure)?"""
-        p, n = np.delete(p, without, axis=0), np.delete(n, without, axis=0)
+    def holds(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> bool:
+        """Do the contacts (but finger ``without``'s) hold the object (force closure)?"""
+        if without is not None:
+            p, n = np.delete(p, without, axis=0), np.delete(n, without, axis=0)
         return holds(p, n, self.options.friction, self.centre, self.rho)
 
     def liftable(self, c: GsConfig) -> tuple[int, ...]:
@@ -153,8 +153,8 @@ def sample_config(s: GsScratch, X_GO: np.ndarray) -> GsConfig | None:
         return None
     q = s.hm.q.copy()
     q[s.hm.hand.idx] = g.finger_q
-    eps = s.closure(g.points, g.normals)
-    return GsConfig(X_GO.copy(), g.points.copy(), g.normals.copy(), q, eps) if eps > 0 else None
+    ok = s.holds(g.points, g.normals)
+    return GsConfig(X_GO.copy(), g.points.copy(), g.normals.copy(), q) if ok else None
 
 
 def gs_path(s: GsScratch, a: GsConfig, b_pose: np.ndarray, b_p: np.ndarray, rng: np.random.Generator,
@@ -194,9 +194,7 @@ def gs_path(s: GsScratch, a: GsConfig, b_pose: np.ndarray, b_p: np.ndarray, rng:
         if why is not None:
             s.failures[why] = s.failures.get(why, 0) + 1
             return None
-        last = GsConfig(X_GO, p, n, q, np.nan if moving else a.eps)
+        last = GsConfig(X_GO, p, n, q)
         out.append(last)
-    if moving:  # the epsilon (a 6-D hull) of the last step only: the contacts stay on it
-        out[-1] = GsConfig(out[-1].X_GO, out[-1].p, out[-1].n, out[-1].q, s.closure(out[-1].p, out[-1].n))
     return out
 

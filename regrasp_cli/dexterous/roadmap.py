@@ -6,7 +6,7 @@ each finger's contact is drawn among the surface points inside the finger's work
 whose normal faces the closing fingertip, and its joints follow by IK; a sample is kept
 when the hand does not collide (finger-finger, finger-object, object-palm) and the
 contacts are force closure.  The start's grasp is the best of such samples at the start
-pose: most fingers that may let go, then the largest epsilon.
+pose: most fingers that may let go, then the finger joints farthest from their limits.
 
 An edge (:func:`extend`) turns and moves the object from a node towards a target pose by
 at most ``step_rad`` and ``step_m``, each contact sliding along the geodesic to the
@@ -126,8 +126,7 @@ def rlg_sample(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, candida
                 break
         else:
             return None
-    eps = s.closure(points, normals)
-    return GsConfig(X_GO.copy(), points, normals, q, eps) if eps > 0 else None
+    return GsConfig(X_GO.copy(), points, normals, q) if s.holds(points, normals) else None
 
 
 def comfort(s: GsScratch, c: GsConfig) -> float:
@@ -205,6 +204,14 @@ def _distance(X_a: np.ndarray, X_b: np.ndarray, rho: float) -> float:
     return Rotation.from_matrix(X_a[:3, :3].T @ X_b[:3, :3]).magnitude() + np.linalg.norm(X_b[:3, 3] - X_a[:3, 3]) / rho
 
 
+def _distances(X_a: np.ndarray, X_b: np.ndarray, rho: float) -> np.ndarray:
+    """:func:`_distance` from each pose of ``X_a`` (k, 4, 4) to ``X_b`` (4, 4), at once: the
+    angle from the chord, ``|R_a - R_b|_F = 2 sqrt(2) sin(angle / 2)`` (exact near 0)."""
+    chord = np.linalg.norm(X_a[:, :3, :3] - X_b[:3, :3], axis=(1, 2))
+    angle = 2.0 * np.arcsin(np.minimum(chord / (2.0 * np.sqrt(2.0)), 1.0))
+    return angle + np.linalg.norm(X_a[:, :3, 3] - X_b[:3, 3], axis=1) / rho
+
+
 def _random_pose(X_start: np.ndarray, box: float, rng: np.random.Generator) -> np.ndarray:
     X = np.eye(4)
     X[:3, :3] = Rotation.random(random_state=rng).as_matrix()
@@ -247,7 +254,7 @@ def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Gener
         target = X_goal if to_goal else _random_pose(start.X_GO, o.box_m, rng)
         # nearest node (towards the goal: of those that failed it less than twice), ties
         # (a regrasp keeps the pose) broken at random
-        d = np.array([_distance(c.X_GO, target, s.rho) for c in tree.nodes]) + 1e-9 * rng.random(len(tree.nodes))
+        d = _distances(np.array([c.X_GO for c in tree.nodes]), target, s.rho) + 1e-9 * rng.random(len(tree.nodes))
         if to_goal:
             d[[k for k, n in goal_fails.items() if n >= 2]] = np.inf
             if np.isinf(d).all():

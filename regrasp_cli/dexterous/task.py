@@ -133,11 +133,10 @@ def given_start(problem: InhandProblem, s: GsScratch, rng: np.random.Generator) 
     if s.collides(spec.X_GO_start, q):
         raise InputError(spec.file, "start_grasp", "with the fingertips on these contacts the hand collides with "
                                                    "the object or itself")
-    eps = s.closure(p, n)
-    if eps <= 0:
+    if s.closure(p, n) <= 0:  # exact, with the validator's margin: this is the user's grasp
         raise InputError(spec.file, "start_grasp", f"these contacts do not hold the object: not force closure "
                                                    f"with friction {spec.object.friction:g}")
-    return GsConfig(spec.X_GO_start.copy(), p, n, q, eps)
+    return GsConfig(spec.X_GO_start.copy(), p, n, q)
 
 
 def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> InhandOutcome:

@@ -28,6 +28,7 @@ class IKOptions:
     damping: float = 1e-4
     max_step: float = 0.5  # rad (or m) per joint per iteration
     restarts: int = 20
+    patience: int | None = None  # give an attempt up after this many iterations without 1 % less error
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,7 @@ def _solve(robot: Robot, frames: tuple[int, ...], q_seed: np.ndarray, idx: np.nd
         q = q_seed.copy()
         if attempt:
             q[idx] = rng.uniform(lo, hi)
+        least, since = np.inf, 0
         for _ in range(options.max_iters):
             iters += 1
             qp = robot.to_pin(q)
@@ -66,6 +68,10 @@ def _solve(robot: Robot, frames: tuple[int, ...], q_seed: np.ndarray, idx: np.nd
             ep, er = max(r[1] for r in res), max(r[2] for r in res)
             if ep < options.tol_position and er < options.tol_rotation:
                 return IKResult(q, True, ep, er, iters)
+            if options.patience is not None:  # stalled against a limit or out of reach
+                least, since = (ep + er, 0) if ep + er < 0.99 * least else (least, since + 1)
+                if since >= options.patience:
+                    break
             e = np.concatenate([r[0] for r in res])
             J = np.vstack([pin.computeFrameJacobian(model, data, qp, f, reference)[rows] for f in frames])
             J = J[:, robot._idx_q[idx]] if robot._identity else _jacobian_columns(robot, J, idx)

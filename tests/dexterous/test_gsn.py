@@ -45,8 +45,7 @@ def _check(s, mesh, kin, c):
     tips = s.hand.tips(kin, c.q)
     assert np.abs(tips - tip_targets(s.X_WG @ c.X_GO, c.p, c.n, s.hand.radii)).max() < 3e-4
     assert np.abs(trimesh.proximity.signed_distance(mesh, c.p)).max() < 1e-9  # on the surface
-    eps = s.closure(c.p, c.n)
-    assert eps > 0 and (np.isnan(c.eps) or eps == pytest.approx(c.eps))  # NaN: a path's inner step
+    assert s.closure(c.p, c.n) > 0
 
 
 def test_sampled_configurations_are_in_gs_n_and_the_thumb_seldom_lets_go(gs, robot):
@@ -85,7 +84,6 @@ def test_a_path_in_gs_n_keeps_contacts_and_closure_at_every_step(gs, robot):
         found += 1
         assert np.allclose(path[-1].X_GO, X)
         q_prev = c.q
-        assert not np.isnan(path[-1].eps)
         for step in path:
             _check(s, mesh, kin, step)
             assert np.allclose(step.p[list(fixed)], c.p[list(fixed)])

@@ -115,6 +115,6 @@ def test_a_finger_that_the_others_cannot_spare_does_not_step(gs):
     # support by moving them to the first finger's side, then no finger may step
     p, n = start.p.copy(), start.n.copy()
     p[1:3], n[1:3] = p[0], n[0]
-    weak = type(start)(start.X_GO, p, n, start.q, 0.0)
+    weak = type(start)(start.X_GO, p, n, start.q)
     assert not s.holds(p, n, 3)
     assert finger_step(s, weak, 3, start.p[3], start.n[3], rng) is None
