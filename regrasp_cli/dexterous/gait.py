@@ -38,6 +38,7 @@ class GaitOptions:
     gait_m: float = 0.012  # contact drift from the GS_n path before a finger steps
     lifts_m: tuple[float, ...] = (0.004, 0.008, 0.016, 0.03)  # fingertip lift heights tried
     check_rad: float = 0.04  # joint step between collision checks of a moving finger
+    confirm_rad: float = 0.01  # the same, for the finger step kept (`regrasp validate`'s resolution)
     max_joint_step: float = 0.2  # rad per step of a transfer: more is an IK branch jump
 
 
@@ -136,7 +137,11 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
         if up_a is None or up_b is None:
             continue
         qs = [c.q, up_a, up_b, down]
-        if all(_segment_free(s, a, b, f, others, o.check_rad) for a, b in zip(qs, qs[1:])):
+        segments = list(zip(qs, qs[1:]))
+        # coarse first (most tries fail), then as finely as the validator: a distal link
+        # can graze a face between coarse checks
+        if all(_segment_free(s, a, b, f, others, o.check_rad) for a, b in segments) and \
+                all(_segment_free(s, a, b, f, others, o.confirm_rad) for a, b in segments):
             return Regrasp(f, np.array(qs), c, GsConfig(c.X_GO, p, n, down))
     return None
 

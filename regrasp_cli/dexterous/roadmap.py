@@ -168,6 +168,50 @@ def regrasp_one(s: GsScratch, c: GsConfig, rng: np.random.Generator, o: RoadmapO
     return None
 
 
+def _reach_ahead(s: GsScratch, f: int, p: np.ndarray, n: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(k, c) bool: is the fingertip centre of finger ``f`` on the contacts ``p`` (c, 3)
+    with normals ``n`` (c, 3), object frame, inside its workspace with the object at each
+    pose of ``poses`` (k, 4, 4)?"""
+    c_O = p + s.hand.radii[f] * n
+    c_G = np.einsum("kij,cj->kci", poses[:, :3, :3], c_O) + poses[:, None, :3, 3]
+    return (s.hm.voxels(s.workspaces)[f].lookup(c_G.reshape(-1, 3)) >= 0).reshape(len(poses), len(p))
+
+
+def _turns(inside: np.ndarray) -> np.ndarray:
+    """(c,) how many of the first poses, in a row, have every finger inside: ``inside`` (k, c)."""
+    return np.argmin(np.vstack([inside, np.zeros((1, inside.shape[1]), bool)]), axis=0)
+
+
+def aimed_regrasp(s: GsScratch, c: GsConfig, X_goal: np.ndarray, rng: np.random.Generator, o: RoadmapOptions,
+                  g: GaitOptions, ahead: int = 3) -> Regrasp | None:
+    """A finger that may let go steps to the contact that lets the object turn furthest
+    towards ``X_goal`` with every fingertip inside its workspace (up to ``ahead`` edges
+    of ``o.step_rad``), farther than the grasp now does; None when no finger can.  On a
+    flat face a random step seldom helps the next turn: the contacts the turn needs are
+    where a fingertip has room to follow them."""
+    liftable = s.liftable(c)
+    if not liftable:
+        return None
+    poses = np.stack([step_towards(c.X_GO, X_goal, k * o.step_rad, k * o.step_m) for k in range(1, ahead + 1)])
+    each = np.stack([_reach_ahead(s, f, c.p[f:f + 1], c.n[f:f + 1], poses)[:, 0] for f in range(len(c.p))], axis=1)
+    now = int(_turns(each.all(axis=1)[:, None])[0])
+    options = []  # (turns, tie-break, finger, candidate, workspace sample)
+    for f in liftable:
+        idx, near = _candidates(s, c.X_GO, f)
+        if idx.size == 0:
+            continue
+        others = np.delete(each, f, axis=1).all(axis=1)
+        turns = _turns(_reach_ahead(s, f, s.sampled.points[idx], s.sampled.normals[idx], poses) & others[:, None])
+        for k in np.nonzero(turns > now)[0]:
+            options.append((int(turns[k]), rng.random(), f, int(idx[k]), int(near[k])))
+    options.sort(reverse=True)
+    for _, _, f, i, near in options[:max(1, o.candidates // 8)]:
+        step = finger_step(s, c, f, s.sampled.points[i], s.sampled.normals[i], rng, g, _seed(s, c.q, f, near))
+        if step is not None:
+            return step
+    return None
+
+
 def step_towards(X_a: np.ndarray, X_b: np.ndarray, step_rad: float, step_m: float) -> np.ndarray:
     """The pose from X_a towards X_b, at most ``step_rad`` and ``step_m`` away (X_b when
     within both)."""
@@ -235,7 +279,8 @@ def _expand(s: GsScratch, a: GsConfig, target: np.ndarray, to_goal: bool, rng: n
         if pieces:
             return pieces
     s.generated += 1
-    r = regrasp_one(s, a, rng, o, g)
+    r = aimed_regrasp(s, a, target, rng, o, g) if to_goal else None
+    r = r or regrasp_one(s, a, rng, o, g)
     return None if r is None else [r]
 
 

@@ -14,10 +14,11 @@ from scipy.spatial.transform import Rotation
 
 from conftest import ROOT
 
-from regrasp_cli.dexterous.gait import Regrasp, Transfer, finger_step, reduce_path
+from regrasp_cli.dexterous.gait import GaitOptions, Regrasp, Transfer, finger_step, reduce_path
 from regrasp_cli.dexterous.gsn import GsScratch, gs_path
 from regrasp_cli.dexterous.hand import tip_targets
-from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, start_config, step_towards
+from regrasp_cli.dexterous.roadmap import (RoadmapOptions, _reach_ahead, _turns, aimed_regrasp, grow, start_config,
+                                           step_towards)
 from regrasp_cli.dexterous.surface import Surface
 from regrasp_cli.grasp.single import HandModel
 from regrasp_cli.grasp.surface import build_surface, sampling_step
@@ -118,3 +119,32 @@ def test_a_finger_that_the_others_cannot_spare_does_not_step(gs):
     weak = type(start)(start.X_GO, p, n, start.q)
     assert not s.holds(p, n, 3)
     assert finger_step(s, weak, 3, start.p[3], start.n[3], rng) is None
+
+
+def _turns_of(s, c, poses):
+    each = np.stack([_reach_ahead(s, f, c.p[f:f + 1], c.n[f:f + 1], poses)[:, 0] for f in range(len(c.p))], axis=1)
+    return int(_turns(each.all(axis=1)[:, None])[0])
+
+
+def test_an_aimed_regrasp_lets_the_object_turn_further_towards_the_goal(gs):
+    """Where the fingertips cannot follow the next turns (a contact leaves its finger's
+    workspace), the aimed regrasp moves one finger so that they can follow more of them,
+    and the step is physically feasible."""
+    s, o = gs, RoadmapOptions()
+    rng = np.random.default_rng(3)
+    start = start_config(s, np.eye(4), rng, o)
+    tried = improved = 0
+    for k, axis in enumerate(([1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [0, 1, 1], [1, 0, 1])):
+        goal = _goal(3.0, axis)
+        poses = np.stack([step_towards(start.X_GO, goal, j * o.step_rad, j * o.step_m) for j in (1, 2, 3)])
+        before = _turns_of(s, start, poses)
+        if before == 3:
+            continue  # nothing to aim for
+        tried += 1
+        r = aimed_regrasp(s, start, goal, np.random.default_rng(k), o, GaitOptions())
+        if r is None:
+            continue
+        improved += 1
+        assert _turns_of(s, r.after, poses) > before
+        assert np.allclose(_assert_feasible(s, [r], start), start.X_GO)
+    assert tried >= 4 and improved >= 2
