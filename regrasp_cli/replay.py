@@ -220,18 +220,44 @@ class Carry:
         return kin.fk(q, kin.robot.hands[self.hand].grasp_frame) @ self.X_PO
 
 
-def carry_of(file: Path, plan: Plan, k: int, kin: Kinematics, X_WO: np.ndarray) -> Carry:
+@dataclass(frozen=True)
+class InHandCarry:
+    """The object moved by the fingers (an in-hand phase): its pose X_WO given at each
+    waypoint, ``poses`` (k, 4, 4), between them interpolated as the joints are along the
+    straight segments of ``waypoints`` (k, nq)."""
+
+    waypoints: np.ndarray
+    poses: np.ndarray
+
+    def X_WO(self, kin: Kinematics, q: np.ndarray) -> np.ndarray:
+        """The pose at the point of the waypoint segments nearest ``q`` (nq,): the
+        position linearly, the rotation by the geodesic between the waypoints' (steps of
+        a tenth of a radian at most, so the first-order form's error is below 1e-3 rad)."""
+        if len(self.waypoints) == 1:
+            return self.poses[0]
+        a, d = self.waypoints[:-1], np.diff(self.waypoints, axis=0)
+        dd = np.einsum("ij,ij->i", d, d)
+        s = np.clip(np.einsum("ij,ij->i", q - a, d) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+        j = int(np.argmin(np.linalg.norm(a + s[:, None] * d - q, axis=1)))
+        A, B, t = self.poses[j], self.poses[j + 1], float(s[j])
+        X = np.eye(4)
+        X[:3, 3] = (1 - t) * A[:3, 3] + t * B[:3, 3]
+        u, _, vt = np.linalg.svd((1 - t) * A[:3, :3] + t * B[:3, :3])  # the nearest rotation
+        X[:3, :3] = u @ vt
+        return X
+
+
+def carry_of(file: Path, plan: Plan, k: int, kin: Kinematics, X_WO: np.ndarray) -> Carry | InHandCarry:
     """How the object moves in phase ``k`` given its pose X_WO (4, 4) at the end of the
     previous phase (or the start placement): at the phase's placement when it rests, with
-    the first holding hand (by name order) when held.
-
-    Raises:
-        InputError: an in-hand phase (the object moves in the fingers: not replayed yet).
-    """
+    the first holding hand (by name order) when held, as its ``object_poses`` say in an
+    in-hand phase (InputError when it has none)."""
     phase = plan.phases[k]
     if phase.kind.inhand:
-        raise InputError(file, f"phases[{k}].kind", f"{phase.kind.value} phases (the object moving in the "
-                                                    "fingers) cannot be replayed by this version")
+        if phase.object_poses is None:
+            raise InputError(file, f"phases[{k}].object_poses", f"expected the object's pose at each waypoint of "
+                                                                f"a {phase.kind.value} phase")
+        return InHandCarry(np.asarray(phase.waypoints, float), np.asarray(phase.object_poses, float))
     if phase.placement is not None:
         return Carry(None, plan.placement(phase.placement).X_WO)
     hand = sorted(phase.holding)[0]

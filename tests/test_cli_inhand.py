@@ -12,6 +12,7 @@ import json
 import numpy as np
 import pytest
 import yaml
+from scipy.spatial.transform import Rotation
 
 from cli_helpers import assert_one_error_line, needs_separate_stderr, run, write_scene
 from conftest import ROOT
@@ -135,3 +136,27 @@ def test_bad_scene_fields_are_one_line(tmp_path, cache_dir, changes, words):
     result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "p.json")
     assert_one_error_line(result, str(scene), *words)
     assert not (tmp_path / "p.json").exists()
+
+
+def test_show_follows_the_object_through_the_fingers(planned):
+    """`regrasp show` replays an in-hand plan: the object is at the plan's pose at every
+    waypoint, and half-way along a transfer's segment between the poses at its ends."""
+    from regrasp_cli.show.motion import key_frames, load_plan_view
+
+    out, _ = planned
+    view = load_plan_view(out)
+    moved = 0
+    for i, phase in enumerate(view.plan.phases):
+        for q, X in zip(phase.waypoints, phase.object_poses):
+            assert np.allclose(view.X_WO(i, q), X, atol=1e-9)
+        for (qa, qb), (A, B) in zip(zip(phase.waypoints, phase.waypoints[1:]),
+                                    zip(phase.object_poses, phase.object_poses[1:])):
+            if np.allclose(A, B):
+                continue
+            moved += 1
+            X = view.X_WO(i, (qa + qb) / 2)
+            assert np.allclose(X[:3, 3], (A[:3, 3] + B[:3, 3]) / 2, atol=1e-9)
+            half = Rotation.from_matrix(A[:3, :3].T @ B[:3, :3]).magnitude() / 2
+            assert abs(Rotation.from_matrix(A[:3, :3].T @ X[:3, :3]).magnitude() - half) < 1e-3
+    assert moved > 0
+    assert [k.name for k in key_frames(view)] == ["start", "end"]

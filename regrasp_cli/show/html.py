@@ -267,7 +267,7 @@ def plan_page(view: PlanView, fps: float = 25.0, source: str = "visual") -> str:
     plan = view.plan
     phases = [{"name": p.name, "start": float(p.times[0]), "end": float(p.times[-1]),
                "kind": p.kind.value, "holding": list(p.holding),
-               "text": f"{holding_text(p.holding, p.touching)} ({p.kind.value})"} for p in plan.phases]
+               "text": f"{holding_text(p.holding, p.touching, p.kind)} ({p.kind.value})"} for p in plan.phases]
     scene_name = Path(str(plan.scene.get("file", ""))).name or view.file.name
     data = {
         "title": f"{view.file.name}: {scene_name}, {plan.planner} planner, seed {plan.seed}",

@@ -206,8 +206,12 @@ def frame_soup(view: PlanView, soups: PlanSoups, q: np.ndarray, X_WO: np.ndarray
     return Soup.join([soups.obstacles, robot_soup(soups.links, X_WL, soups.link_soups), soups.object.moved(X_WO)])
 
 
-def holding_text(holding: tuple[str, ...], touching: tuple[str, ...]) -> str:
+def holding_text(holding: tuple[str, ...], touching: tuple[str, ...], kind: Kind | None = None) -> str:
     """Words for who has the object in a phase, e.g. ``held by the right hand``."""
+    if kind is not None and kind.inhand:
+        hands = " and ".join(dict.fromkeys(touching)) or "the"
+        return (f"turned by the {hands} fingertips" if kind == Kind.INHAND_TRANSFER
+                else f"held by the {hands} fingertips while one steps")
     if holding:
         hands = " and ".join(dict.fromkeys(holding))
         text = f"held by the {hands} hand" + ("s" if len(set(holding)) > 1 else "")

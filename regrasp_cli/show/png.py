@@ -126,7 +126,7 @@ def key_frame_pngs(view: PlanView, size: tuple[int, int] = (960, 720), source: s
         when = "start of" if kf.name == "start" else "end of"
         fig.suptitle(f"{i}/{len(frames)} {kf.name}: {when} {phase.name}, t = {kf.t:.2f} s of {view.duration:.2f} s",
                      y=0.975, fontsize=13)
-        fig.text(0.5, 0.915, f"{scene_name}: object {holding_text(phase.holding, phase.touching)}",
+        fig.text(0.5, 0.915, f"{scene_name}: object {holding_text(phase.holding, phase.touching, phase.kind)}",
                  ha="center", fontsize=10, color="0.3")
         out.append((f"{i:02d}_{kf.name}.png", _png_bytes(fig)))
     return out
