@@ -116,6 +116,14 @@ class Fields:
             raise self.error(key, f"expected a non-empty string, found {_kind(v)}")
         return v
 
+    def bool(self, key: str, default: Any = ...) -> bool:
+        if default is not ... and key not in self.data:
+            return default
+        v = self.raw(key)
+        if not isinstance(v, bool):
+            raise self.error(key, f"expected true or false, found {_kind(v)}")
+        return v
+
     def int(self, key: str, default: Any = ..., minimum: int | None = None) -> int:
         if default is not ... and key not in self.data:
             return default
@@ -585,12 +593,14 @@ INHAND_FORMAT = "regrasp.inhand/1"
 class InhandPlanning:
     """Options of the in-hand planner (seed 003): ``nodes`` the tree's budget of
     expansions, ``step_rad`` the object's turn per edge, ``gait_m`` the contact drift
-    before a finger steps (metres, radians)."""
+    before a finger steps (metres, radians), ``smooth`` whether runs of finger steps are
+    shortened (:mod:`regrasp_cli.dexterous.smooth`)."""
 
     seed: int = 0
-    nodes: int = 300
+    nodes: int = 1500
     step_rad: float = 0.35
     gait_m: float = 0.012
+    smooth: bool = True
 
 
 @dataclass(frozen=True)
@@ -638,8 +648,9 @@ def load_inhand_spec(path: str | Path) -> InhandSpec:
     planning = InhandPlanning()
     if f.has("planning"):
         p = f.sub("planning")
-        p.only("seed", "nodes", "step_rad", "gait_m")
+        p.only("seed", "nodes", "step_rad", "gait_m", "smooth")
         planning = InhandPlanning(p.int("seed", planning.seed, minimum=0), p.int("nodes", planning.nodes, minimum=1),
                                   p.float("step_rad", planning.step_rad, positive=True, maximum=3.2),
-                                  p.float("gait_m", planning.gait_m, positive=True))
+                                  p.float("gait_m", planning.gait_m, positive=True),
+                                  p.bool("smooth", planning.smooth))
     return InhandSpec(file, robot, hand, _robot_conf(f, "robot_config"), obj, start, goal, grasp, planning)

@@ -130,6 +130,7 @@ def test_a_goal_out_of_the_fingers_reach_is_one_line(tmp_path, cache_dir):
     ({"object_goal": {"rpy": [0, 0]}}, ("object_goal.rpy", "3 numbers")),
     ({"start_grasp": "somehow"}, ("start_grasp", "'find'")),
     ({"planning": {"nodes": 0}}, ("planning.nodes", ">= 1")),
+    ({"planning": {"smooth": "yes"}}, ("planning.smooth", "true or false")),
 ])
 def test_bad_scene_fields_are_one_line(tmp_path, cache_dir, changes, words):
     scene = write_scene(tmp_path / "s.yaml", _scene(**changes))

@@ -112,11 +112,13 @@ def _lifted(s: GsScratch, q: np.ndarray, f: int, X_WO: np.ndarray, p_O: np.ndarr
 
 
 def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.ndarray, rng: np.random.Generator,
-                o: GaitOptions = GaitOptions(), q_hint: np.ndarray | None = None) -> Regrasp | None:
+                o: GaitOptions = GaitOptions(), q_hint: np.ndarray | None = None,
+                q_down: np.ndarray | None = None) -> Regrasp | None:
     """The regrasping path of finger ``f`` from its contact in ``c`` to ``p_new`` (3,) with
     outward normal ``n_new`` (object frame), or None: the others must hold the object, the
     new grasp be force closure, the finger reach it and move there without collision.
-    ``q_hint``: joint values near the new contact's (an IK seed)."""
+    ``q_hint``: joint values near the new contact's (an IK seed); ``q_down``: finger
+    ``f``'s joints there, known (checked, not solved for)."""
     if not s.holds(c.p, c.n, f):  # then the new grasp holds too: it has one contact more
         return None
     p, n = c.p.copy(), c.n.copy()
@@ -128,7 +130,14 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     if q_hint is not None:
         idx = s.hm.hand.finger_idx[f]
         seed[idx] = q_hint[idx]
-    down = reach(s.hand, seed, tip_targets(X_WO, p, n, s.hand.radii), rng, fingers=(f,), restarts=1, tol=s.options.tol)
+    targets = tip_targets(X_WO, p, n, s.hand.radii)
+    if q_down is None:
+        down = reach(s.hand, seed, targets, rng, fingers=(f,), restarts=1, tol=s.options.tol)
+    else:
+        down = c.q.copy()
+        down[s.hm.hand.finger_idx[f]] = q_down[s.hm.hand.finger_idx[f]]
+        if np.linalg.norm(s.hand.tips(s.kin, down)[f] - targets[f]) > s.options.tol:
+            return None
     if down is None:
         return None
     for h in o.lifts_m:

@@ -27,6 +27,7 @@ from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp
 from regrasp_cli.dexterous.gsn import GsConfig, GsOptions, GsScratch
 from regrasp_cli.dexterous.hand import reach, tip_targets
 from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, rlg_sample, start_config
+from regrasp_cli.dexterous.smooth import smooth
 from regrasp_cli.dexterous.surface import Surface
 from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.single import HandModel
@@ -169,8 +170,14 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
     if pieces is None:
         out.failure = PlanningFailed(Stage.ROADMAP, f"the GS_n tree did not reach the goal pose in {st.iterations} "
                                                     f"expansions ({st.kept} nodes)")
-    else:
-        out.pieces = pieces
+        return _finish(out, s, stages, t0)
+    out.stats.update(regrasps_unsmoothed=sum(isinstance(p, Regrasp) for p in pieces),
+                     transfers_unsmoothed=sum(not isinstance(p, Regrasp) for p in pieces))
+    if o.smooth:
+        t = perf_counter()
+        pieces = smooth(s, pieces, rng, GaitOptions(gait_m=o.gait_m))
+        stages["smoothing"] = perf_counter() - t
+    out.pieces = pieces
     return _finish(out, s, stages, t0)
 
 

@@ -14,11 +14,12 @@ from scipy.spatial.transform import Rotation
 
 from conftest import ROOT
 
-from regrasp_cli.dexterous.gait import GaitOptions, Regrasp, Transfer, finger_step, reduce_path
+from regrasp_cli.dexterous.gait import GaitOptions, Regrasp, Transfer, carry, finger_step, reduce_path
 from regrasp_cli.dexterous.gsn import GsScratch, gs_path
 from regrasp_cli.dexterous.hand import tip_targets
 from regrasp_cli.dexterous.roadmap import (RoadmapOptions, _reach_ahead, _turns, aimed_regrasp, grow, start_config,
                                            step_towards)
+from regrasp_cli.dexterous.smooth import smooth
 from regrasp_cli.dexterous.surface import Surface
 from regrasp_cli.grasp.single import HandModel
 from regrasp_cli.grasp.surface import build_surface, sampling_step
@@ -148,3 +149,32 @@ def test_an_aimed_regrasp_lets_the_object_turn_further_towards_the_goal(gs):
         assert _turns_of(s, r.after, poses) > before
         assert np.allclose(_assert_feasible(s, [r], start), start.X_GO)
     assert tried >= 4 and improved >= 2
+
+
+def test_smoothing_steps_a_finger_once_where_it_stepped_twice(gs):
+    """A finger that steps twice between two transfers steps once, straight to where it
+    ended, and the path still starts and ends at the same configurations."""
+    s = gs
+    rng = np.random.default_rng(5)
+    start = start_config(s, np.eye(4), rng, RoadmapOptions())
+    f = next(iter(s.liftable(start)))
+    first = None
+    for k in rng.permutation(len(s.sampled.points)):  # two steps of finger f, the second onwards
+        p, n = s.sampled.points[k], s.sampled.normals[k]
+        if np.linalg.norm(p - start.p[f]) > 0.012 or np.linalg.norm(p - start.p[f]) < 0.004:
+            continue
+        step = finger_step(s, start if first is None else first.after, f, p, n, rng)
+        if step is not None and first is None:
+            first = step
+        elif step is not None and s.liftable(first.after):
+            second = step
+            break
+    else:
+        pytest.fail("no two steps of one finger found")
+    turn = carry(s, second.after, _goal(0.2, [0, 0, 1]), rng, s.options.step_m, s.options.step_rad, GaitOptions())
+    assert turn is not None
+    pieces = [first, second, turn]
+    smoothed = smooth(s, pieces, rng)
+    assert [type(p) for p in smoothed] == [Regrasp, Transfer]
+    assert np.array_equal(smoothed[0].after.q, second.after.q)
+    assert np.allclose(_assert_feasible(s, smoothed, start), _assert_feasible(s, pieces, start))
