@@ -485,14 +485,7 @@ def load_scene_spec(path: str | Path) -> SceneSpec:
     robot = _robot_path(f)
     obj = _object(f, 0.5)
 
-    raw = f.data.get("obstacles", []) or []
-    if not isinstance(raw, list):
-        raise f.error("obstacles", "expected a list of obstacles")
-    obstacles = tuple(_obstacle(Fields(file, item, f"obstacles[{i}]")) for i, item in enumerate(raw))
-    names = [ob.name for ob in obstacles]
-    dup = sorted({n for n in names if names.count(n) > 1})
-    if dup:
-        raise f.error("obstacles", f"duplicate obstacle name {dup[0]!r}")
+    obstacles = _obstacles(f)
 
     t = f.sub("task")
     t.only("object_start", "object_goal", "robot_start", "robot_goal")
@@ -529,6 +522,19 @@ def _object(f: Fields, friction: float) -> ObjectSpec:
         mesh = str(resolve_path(f.file, "object.mesh", mesh))
     return ObjectSpec(mesh, o.float("scale", 1.0, positive=True),
                       o.float("friction", friction, positive=True, maximum=MAX_FRICTION))
+
+
+def _obstacles(f: Fields) -> tuple[ObstacleSpec, ...]:
+    """``obstacles``: a list of obstacles with distinct names (default none)."""
+    raw = f.data.get("obstacles", []) or []
+    if not isinstance(raw, list):
+        raise f.error("obstacles", "expected a list of obstacles")
+    obstacles = tuple(_obstacle(Fields(f.file, item, f"obstacles[{i}]")) for i, item in enumerate(raw))
+    names = [ob.name for ob in obstacles]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise f.error("obstacles", f"duplicate obstacle name {dup[0]!r}")
+    return obstacles
 
 
 def _supports(f: Fields, obstacles: tuple[ObstacleSpec, ...]) -> tuple[str, ...] | None:
@@ -617,6 +623,7 @@ class InhandSpec:
     X_GO_goal: np.ndarray  # (4, 4) object goal pose in G (its position the start's when not given)
     start_grasp: Mapping[str, tuple[float, ...]] | None  # finger name -> contact point in O; None: find one
     planning: InhandPlanning
+    obstacles: tuple[ObstacleSpec, ...] = ()  # poses (X_WO) in G here: a nearby surface, a wall
 
 
 def load_inhand_spec(path: str | Path) -> InhandSpec:
@@ -624,7 +631,7 @@ def load_inhand_spec(path: str | Path) -> InhandSpec:
     file, data = read_yaml(path)
     f = Fields(file, data)
     f.only("format", "robot", "hand", "robot_config", "object", "object_start", "object_goal", "start_grasp",
-           "planning")
+           "planning", "obstacles")
     if f.str("format") != INHAND_FORMAT:
         raise f.error("format", f"expected '{INHAND_FORMAT}', found {f.data['format']!r}")
     robot = _robot_path(f)
@@ -653,4 +660,5 @@ def load_inhand_spec(path: str | Path) -> InhandSpec:
                                   p.float("step_rad", planning.step_rad, positive=True, maximum=3.2),
                                   p.float("gait_m", planning.gait_m, positive=True),
                                   p.bool("smooth", planning.smooth))
-    return InhandSpec(file, robot, hand, _robot_conf(f, "robot_config"), obj, start, goal, grasp, planning)
+    return InhandSpec(file, robot, hand, _robot_conf(f, "robot_config"), obj, start, goal, grasp, planning,
+                      _obstacles(f))

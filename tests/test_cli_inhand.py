@@ -161,3 +161,31 @@ def test_show_follows_the_object_through_the_fingers(planned):
             assert abs(Rotation.from_matrix(A[:3, :3].T @ X[:3, :3]).magnitude() - half) < 1e-3
     assert moved > 0
     assert [k.name for k in key_frames(view)] == ["start", "end"]
+
+
+def test_validate_rejects_a_hand_through_an_obstacle(tmp_path, planned):
+    _, d = planned
+
+    def edit(d):  # a plate through the ball and the fingers
+        d["obstacles"] = [{"name": "plate", "shape": "box", "size": [0.2, 0.2, 0.01], "mesh": None,
+                           "pose": d["placements"][0]["pose"]}]
+    issues = _tampered(tmp_path, d, edit)
+    assert any(i.check == "collision" and "obstacle:plate" in i.message for i in issues)
+
+
+def test_the_fingers_keep_off_a_wall_the_open_hand_would_hit(tmp_path, cache_dir):
+    """inhand_ball_wall.yaml: the open hand runs into the wall beside it, and the plan
+    keeps every link and the ball off it (the validator checks the obstacles)."""
+    from regrasp_cli.dexterous.task import load_inhand_problem
+    from regrasp_cli.model.collision import collision_world
+
+    scene = ROOT / "regrasp_cli" / "data" / "scenes" / "inhand_ball_wall.yaml"
+    problem = load_inhand_problem(scene, cache_dir)
+    world = collision_world(problem.robot, problem.obstacles, problem.disabled.links())
+    assert ("f0_distal", "obstacle:wall") in world.colliding_pairs(problem.q_fixed)  # the hand open
+    out = tmp_path / "wall.json"
+    result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", out, "--no-timings")
+    assert result.exit_code == 0, result.output
+    d = json.loads(out.read_text())
+    assert [o["name"] for o in d["obstacles"]] == ["wall"]
+    assert validate_plan(out).valid

@@ -125,7 +125,7 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     p[f], n[f] = p_new, n_new
     X_WO = s.X_WG @ c.X_GO
     others = set(range(len(p))) - {f}
-    s.hm.set_object(np.linalg.inv(c.X_GO))
+    s.place(c.X_GO)
     seed = c.q.copy()  # the other fingers stay; finger f from the hint
     if q_hint is not None:
         idx = s.hm.hand.finger_idx[f]

@@ -42,6 +42,7 @@ from regrasp_cli.dexterous.transfer import interpolate, poses_between
 from regrasp_cli.grasp.single import GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface as SampledSurface
 from regrasp_cli.grasp.workspace import FingerWorkspace
+from regrasp_cli.model.collision import CollisionWorld
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.spatial import inverse
 
@@ -53,6 +54,7 @@ class GsOptions:
     step_rad: float = 0.05  # object rotation per step
     max_joint_step: float = 0.2  # rad per step: more is an IK branch jump
     tol: float = 1e-4  # m, fingertip centre on its target
+    link_room: float | None = None  # m beyond a fingertip where the surface must not turn sharply (GsScratch.clear)
 
 
 @dataclass(frozen=True)
@@ -70,8 +72,10 @@ class GsScratch:
 
     def __init__(self, hm: HandModel, workspaces: tuple[FingerWorkspace, ...], sampled: SampledSurface,
                  surface: Surface, rho: float, options: GsOptions = GsOptions(),
-                 grasp: GraspOptions = GraspOptions()):
+                 grasp: GraspOptions = GraspOptions(), world: CollisionWorld | None = None):
         self.hm, self.workspaces, self.sampled, self.surface = hm, workspaces, sampled, surface
+        self.world = world  # the scene's obstacles with the robot and the object (W), if any
+        self.X_GO = np.eye(4)  # where the object is (:meth:`place`)
         self.rho, self.options, self.grasp = rho, options, grasp
         self.hand = InHand(hm.robot, hm.hand.side, hm.q.copy(), tuple(range(len(hm.hand.finger_idx))))
         self.X_WG = hm.X_WG
@@ -106,11 +110,19 @@ class GsScratch:
         """(m,) bool per sampled surface point: a fingertip touching the surface there
         touches it there only (its sphere, of the largest tip radius, clear of the rest of
         the mesh to 0.5 mm): not across an edge or inside a crease, where the object's
-        least turn would push into the fingertip."""
+        least turn would push into the fingertip; with ``options.link_room``, also the
+        surface within that of the sphere turns less than 45 degrees from the contact's
+        normal: not within a fingertip of an edge, where the finger's links lean over the
+        next face (tried on the cube: docs/DESIGN-NOTES.md)."""
         r = float(self.hand.radii.max())
         c = self.sampled.points + r * self.sampled.normals
         _, d, _ = trimesh.proximity.closest_point(self.surface.mesh, c)
-        return d >= r - 5e-4
+        clear = d >= r - 5e-4
+        if self.options.link_room is None:
+            return clear
+        n = self.sampled.normals
+        near = self.sampled.tree.query_ball_point(c, r + self.options.link_room)
+        return clear & np.array([bool(np.all(n[nb] @ n[i] >= np.cos(np.pi / 4))) for i, nb in enumerate(near)])
 
     @cached_property
     def _exact(self) -> HandModel:
@@ -131,18 +143,31 @@ class GsScratch:
                 return True
         return False
 
+    def place(self, X_GO: np.ndarray) -> None:
+        """Put the object at ``X_GO`` (4, 4) for the collision checks that follow."""
+        self.X_GO = X_GO
+        self.hm.set_object(inverse(X_GO))
+
+    def _hits_obstacle(self, q: np.ndarray) -> bool:
+        if self.world is None:
+            return False
+        self.world.set_object_pose(self.X_WG @ self.X_GO)
+        return not self.world.is_free(q)
+
     def collides(self, X_GO: np.ndarray, q: np.ndarray) -> bool:
         """The hand with the object at ``X_GO``: fingers or palm inside the object (beyond
-        the contact tolerance at the fingertips) or overlapping each other."""
+        the contact tolerance at the fingertips) or overlapping each other, or the hand or
+        the object against an obstacle."""
         self.checks += 1
-        self.hm.set_object(inverse(X_GO))
-        return self.hm.collides(q, set(range(len(self.hand.fingers))), None) or self._fingers_touch(q, None)
+        self.place(X_GO)
+        return (self.hm.collides(q, set(range(len(self.hand.fingers))), None) or self._fingers_touch(q, None)
+                or self._hits_obstacle(q))
 
     def finger_collides(self, q: np.ndarray, finger: int, others: set[int]) -> bool:
-        """Finger ``finger`` (moving, the object where the hand model has it) against the
-        object, the palm and the fingers ``others``."""
+        """Finger ``finger`` (moving, the object where :meth:`place` put it) against the
+        object, the palm, the fingers ``others`` and the obstacles."""
         self.checks += 1
-        return self.hm.collides(q, others, finger) or self._fingers_touch(q, finger)
+        return self.hm.collides(q, others, finger) or self._fingers_touch(q, finger) or self._hits_obstacle(q)
 
 
 def sample_config(s: GsScratch, X_GO: np.ndarray) -> GsConfig | None:

@@ -20,7 +20,7 @@ from regrasp_cli import __version__
 from regrasp_cli.dexterous.gait import Regrasp, Transfer
 from regrasp_cli.dexterous.task import CONTACT_TOLERANCE, InhandOutcome, InhandProblem
 from regrasp_cli.manip.modes import Kind
-from regrasp_cli.manip.record import export_object, relative_path
+from regrasp_cli.manip.record import export_object, obstacle_records, relative_path
 from regrasp_cli.motion.timing import segment_duration
 from regrasp_cli.store import sha256_file
 from regrasp_cli.trajectory import Phase, Placement, Plan
@@ -82,7 +82,7 @@ def make_inhand_plan(problem: InhandProblem, out: InhandOutcome, seed: int, out_
                 "acceleration": np.full(robot.nq, ACCELERATION)},
         object={"name": problem.object.name, "mesh": relative_path(mesh, base), "sha256": sha256_file(mesh),
                 "friction": spec.object.friction},
-        obstacles=(),
+        obstacles=obstacle_records(problem.obstacles, base),
         collision={"contact_tolerance": CONTACT_TOLERANCE, "support_tolerance": CONTACT_TOLERANCE,
                    "disabled_pairs": sorted(list(p) for p in problem.disabled.links())},
         placements=(Placement("start", out.X_WG @ spec.X_GO_start), Placement("goal", out.X_WG @ spec.X_GO_goal)),

@@ -50,6 +50,8 @@ class RoadmapOptions:
     start_samples: int = 60  # RLG samples at the start pose
     candidates: int = 40  # contact candidates per finger per sample
     box_m: float = 0.02  # random targets within this of the start position (each axis)
+    goal_carries: tuple[float, ...] = (1.0,)  # fractions of an edge a carry towards the goal tries, in turn
+    regrasp_carry: bool = False  # an aimed regrasp carries the object one edge on at once
 
 
 @dataclass
@@ -107,7 +109,7 @@ def rlg_sample(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, candida
     """A random GS_n configuration with the object at ``X_GO`` (4, 4), or None (§V: the
     contacts are the free parameters, the joints follow by IK)."""
     s.generated += 1
-    s.hm.set_object(inverse(X_GO))
+    s.place(X_GO)
     n_f = len(s.hand.fingers)
     q = s.hm.q.copy()
     points, normals = np.zeros((n_f, 3)), np.zeros((n_f, 3))
@@ -183,12 +185,14 @@ def _turns(inside: np.ndarray) -> np.ndarray:
 
 
 def aimed_regrasp(s: GsScratch, c: GsConfig, X_goal: np.ndarray, rng: np.random.Generator, o: RoadmapOptions,
-                  g: GaitOptions, ahead: int = 3) -> Regrasp | None:
+                  g: GaitOptions, ahead: int = 3) -> list[Piece] | None:
     """A finger that may let go steps to the contact that lets the object turn furthest
     towards ``X_goal`` with every fingertip inside its workspace (up to ``ahead`` edges
-    of ``o.step_rad``), farther than the grasp now does; None when no finger can.  On a
-    flat face a random step seldom helps the next turn: the contacts the turn needs are
-    where a fingertip has room to follow them."""
+    of ``o.step_rad``), farther than the grasp now does, and the object is carried one
+    edge on (seed 003 §V's regrasp-transfer sequence); the first such step whose carry
+    fails is kept alone when none carries; None when no finger can step.  On a flat face
+    a random step seldom helps the next turn: the contacts the turn needs are where a
+    fingertip has room to follow them, and where its links clear the turning faces."""
     liftable = s.liftable(c)
     if not liftable:
         return None
@@ -205,11 +209,16 @@ def aimed_regrasp(s: GsScratch, c: GsConfig, X_goal: np.ndarray, rng: np.random.
         for k in np.nonzero(turns > now)[0]:
             options.append((int(turns[k]), rng.random(), f, int(idx[k]), int(near[k])))
     options.sort(reverse=True)
+    kept = None
     for _, _, f, i, near in options[:max(1, o.candidates // 8)]:
         step = finger_step(s, c, f, s.sampled.points[i], s.sampled.normals[i], rng, g, _seed(s, c.q, f, near))
-        if step is not None:
-            return step
-    return None
+        if step is None:
+            continue
+        t = carry(s, step.after, poses[0], rng, s.options.step_m, s.options.step_rad, g) if o.regrasp_carry else None
+        if t is not None:
+            return [step, t]
+        kept = kept or [step]
+    return kept
 
 
 def step_towards(X_a: np.ndarray, X_b: np.ndarray, step_rad: float, step_m: float) -> np.ndarray:
@@ -266,21 +275,28 @@ def _random_pose(X_start: np.ndarray, box: float, rng: np.random.Generator) -> n
 def _expand(s: GsScratch, a: GsConfig, target: np.ndarray, to_goal: bool, rng: np.random.Generator,
             o: RoadmapOptions, g: GaitOptions) -> list[Piece] | None:
     """Towards ``target``: slide the contacts (the GS_n path; first towards the goal, the
-    fingers staying where they are), or carry the object with them fixed; when neither
-    goes, one finger regrasps."""
+    fingers staying where they are), or carry the object with them fixed (towards the goal
+    a half and a quarter edge too: a cube's faces tilt into the fingers' links sooner than
+    a ball's); when neither goes, one finger regrasps."""
     X_new = step_towards(a.X_GO, target, o.step_rad, o.step_m)
     for how in (0, 1) if to_goal else rng.permutation(2):
         s.generated += 1
         if how == 0:
             pieces = slide(s, a, X_new, rng, g)
         else:
-            t = carry(s, a, X_new, rng, s.options.step_m, s.options.step_rad, g)
+            for frac in o.goal_carries if to_goal else (1.0,):
+                X = X_new if frac == 1.0 else step_towards(a.X_GO, target, frac * o.step_rad, frac * o.step_m)
+                t = carry(s, a, X, rng, s.options.step_m, s.options.step_rad, g)
+                if t is not None:
+                    break
             pieces = None if t is None else [t]
         if pieces:
             return pieces
     s.generated += 1
-    r = aimed_regrasp(s, a, target, rng, o, g) if to_goal else None
-    r = r or regrasp_one(s, a, rng, o, g)
+    aimed = aimed_regrasp(s, a, target, rng, o, g) if to_goal else None
+    if aimed:
+        return aimed
+    r = regrasp_one(s, a, rng, o, g)
     return None if r is None else [r]
 
 

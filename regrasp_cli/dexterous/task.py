@@ -15,14 +15,14 @@ goal within its budget).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from time import perf_counter
 
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from regrasp_cli.config import InhandSpec, load_inhand_spec
+from regrasp_cli.config import InhandSpec, ObstacleSpec, load_inhand_spec
 from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp
 from regrasp_cli.dexterous.gsn import GsConfig, GsOptions, GsScratch
 from regrasp_cli.dexterous.hand import reach, tip_targets
@@ -34,6 +34,7 @@ from regrasp_cli.grasp.single import HandModel
 from regrasp_cli.grasp.surface import build_surface
 from regrasp_cli.grasp.workspace import hand_workspace
 from regrasp_cli.manip.status import PlanningFailed, Stage
+from regrasp_cli.model.collision import CollisionOptions, ObjectPlacement, collision_world
 from regrasp_cli.model.objects import ObjectMesh
 from regrasp_cli.model.robot import Kinematics, Robot, load_robot
 from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
@@ -50,6 +51,7 @@ class InhandProblem:
     object: ObjectMesh
     disabled: DisabledPairs
     q_fixed: np.ndarray  # (nq,) the robot holding the wrist, the hand open
+    obstacles: tuple[ObstacleSpec, ...] = ()  # the scene's, posed in W
 
     @property
     def hand(self) -> str:
@@ -75,7 +77,9 @@ def load_inhand_problem(path: str | Path, cache_dir: Path | None) -> InhandProbl
         except InputError as exc:
             raise InputError(spec.file, exc.field, exc.message) from None
     q[h.idx] = h.open
-    return InhandProblem(spec, robot, obj, disabled_pairs(robot, cache_dir), q)
+    X_WG = Kinematics(robot).fk(q, h.grasp_frame)
+    obstacles = tuple(replace(o, X_WO=X_WG @ o.X_WO) for o in spec.obstacles)
+    return InhandProblem(spec, robot, obj, disabled_pairs(robot, cache_dir), q, obstacles)
 
 
 @dataclass
@@ -99,7 +103,13 @@ def scratch(problem: InhandProblem, cache_dir: Path | None, rng: np.random.Gener
     tip = min(f.tip_radius for f in robot.hands[hand].spec.fingers)
     sampled = build_surface(mesh, 0.5 * tip, rng)
     rho = float(np.linalg.norm(mesh.vertices - sampled.mass_centre, axis=1).max())
-    return GsScratch(hm, ws, sampled, Surface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction))
+    world = None
+    if problem.obstacles:  # checked as the validator does, with the object touched by this hand only
+        world = collision_world(robot, problem.obstacles, problem.disabled.links(),
+                                ObjectPlacement(mesh, hm.X_WG, None, (hand,)),
+                                CollisionOptions(CONTACT_TOLERANCE, CONTACT_TOLERANCE))
+    return GsScratch(hm, ws, sampled, Surface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction),
+                     world=world)
 
 
 def _check_size(problem: InhandProblem, s: GsScratch) -> None:

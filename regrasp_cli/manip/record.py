@@ -67,6 +67,13 @@ def _stats(outcome: Outcome, options: OnlineOptions, hashes: dict[str, str], tim
     return stats
 
 
+def obstacle_records(obstacles, base: Path) -> tuple[dict, ...]:
+    """The plan's ``obstacles``: each ObstacleSpec (posed in W) as a dict, mesh paths
+    relative to ``base``."""
+    return tuple({"name": o.name, "shape": o.shape, "size": list(o.size), "pose": o.X_WO,
+                  "mesh": None if o.mesh is None else relative_path(o.mesh, base)} for o in obstacles)
+
+
 def make_plan(problem: Problem, lists: dict[str, GraspList], outcome: Outcome, options: OnlineOptions, seed: int,
               out_file: Path, cache_dir: Path, hashes: dict[str, str], timings: bool) -> Plan:
     """The plan of ``outcome``; paths in it are relative to ``out_file``'s folder.  With
@@ -74,8 +81,7 @@ def make_plan(problem: Problem, lists: dict[str, GraspList], outcome: Outcome, o
     robot, spec = problem.robot, problem.spec
     base = Path(out_file).resolve().parent
     mesh = export_object(problem, cache_dir)
-    obstacles = tuple({"name": o.name, "shape": o.shape, "size": list(o.size), "pose": o.X_WO,
-                       "mesh": None if o.mesh is None else relative_path(o.mesh, base)} for o in spec.obstacles)
+    obstacles = obstacle_records(spec.obstacles, base)
     return Plan(
         status="failed" if outcome.failure else "solved",
         failure=None if outcome.failure is None else outcome.failure.as_dict(),

@@ -130,11 +130,12 @@ def _turns_of(s, c, poses):
 def test_an_aimed_regrasp_lets_the_object_turn_further_towards_the_goal(gs):
     """Where the fingertips cannot follow the next turns (a contact leaves its finger's
     workspace), the aimed regrasp moves one finger so that they can follow more of them,
-    and the step is physically feasible."""
-    s, o = gs, RoadmapOptions()
+    then carries the object one edge towards the goal when it can, all physically
+    feasible."""
+    s, o = gs, RoadmapOptions(regrasp_carry=True)
     rng = np.random.default_rng(3)
     start = start_config(s, np.eye(4), rng, o)
-    tried = improved = 0
+    tried = improved = carried = 0
     for k, axis in enumerate(([1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [0, 1, 1], [1, 0, 1])):
         goal = _goal(3.0, axis)
         poses = np.stack([step_towards(start.X_GO, goal, j * o.step_rad, j * o.step_m) for j in (1, 2, 3)])
@@ -142,13 +143,16 @@ def test_an_aimed_regrasp_lets_the_object_turn_further_towards_the_goal(gs):
         if before == 3:
             continue  # nothing to aim for
         tried += 1
-        r = aimed_regrasp(s, start, goal, np.random.default_rng(k), o, GaitOptions())
-        if r is None:
+        pieces = aimed_regrasp(s, start, goal, np.random.default_rng(k), o, GaitOptions())
+        if pieces is None:
             continue
         improved += 1
-        assert _turns_of(s, r.after, poses) > before
-        assert np.allclose(_assert_feasible(s, [r], start), start.X_GO)
-    assert tried >= 4 and improved >= 2
+        assert isinstance(pieces[0], Regrasp) and _turns_of(s, pieces[0].after, poses) > before
+        end = poses[0] if len(pieces) == 2 else start.X_GO
+        assert [type(p) for p in pieces] in ([Regrasp], [Regrasp, Transfer])
+        carried += len(pieces) == 2
+        assert np.allclose(_assert_feasible(s, pieces, start), end)
+    assert tried >= 4 and improved >= 2 and carried >= 1
 
 
 def test_smoothing_steps_a_finger_once_where_it_stepped_twice(gs):
