@@ -13,8 +13,8 @@ The suite (``format: regrasp.inhand-bench/1``): ``name``; ``hands`` (each ``{rob
 side, label, objects}``: a robot.yaml path or ``builtin:NAME``, the hand's side (default
 right), and the labels of the objects it is given, default all); ``objects`` (each
 ``{mesh, scale, friction, label}``, paths relative to the suite file; ``optional: true``
-skips a missing file); ``goals`` (runs per hand and object, default 20); ``nodes`` (the
-tree's budget, default 300).
+skips a missing file); ``goals`` (runs per hand and object, default 20), from goal
+``first_goal`` (default 0); ``nodes`` (the tree's budget, default 1500).
 """
 
 from __future__ import annotations
@@ -44,18 +44,18 @@ def runs_of(suite_file: Path, out: Path) -> list[dict]:
     file, d = read_yaml(suite_file)
     if d.get("format") != "regrasp.inhand-bench/1":
         sys.exit(f"{file}: format: expected 'regrasp.inhand-bench/1'")
-    goals, nodes = int(d.get("goals", 20)), int(d.get("nodes", 300))
+    goals, nodes, first = int(d.get("goals", 20)), int(d.get("nodes", 1500)), int(d.get("first_goal", 0))
     runs = []
     for h in d["hands"]:
         hand = h["robot"] if h["robot"].startswith("builtin:") else str((file.parent / h["robot"]).resolve())
         label = h.get("label", Path(hand).stem)
         objects = [o for o in d["objects"] if h.get("objects") is None or o["label"] in h["objects"]]
-        runs += _hand_runs(file, out, hand, h.get("side", "right"), label, objects, goals, nodes)
+        runs += _hand_runs(file, out, hand, h.get("side", "right"), label, objects, range(first, first + goals), nodes)
     return runs
 
 
 def _hand_runs(file: Path, out: Path, hand: str, side: str, hand_label: str, objects: list[dict],
-               goals: int, nodes: int) -> list[dict]:
+               goals: range, nodes: int) -> list[dict]:
     runs = []
     for o in objects:
         mesh = o["mesh"]
@@ -70,7 +70,7 @@ def _hand_runs(file: Path, out: Path, hand: str, side: str, hand_label: str, obj
         obj = load_object_mesh(mesh, base_dir=file.parent, scale=o.get("scale", 1.0))
         centre = obj.mesh.bounds.mean(axis=0)
         label = o.get("label", Path(mesh).stem.replace("builtin:", ""))
-        for k in range(goals):
+        for k in goals:
             rng = np.random.default_rng(k)
             rpy = Rotation.random(random_state=rng).as_euler("xyz")
             scene = {"format": "regrasp.inhand/1", "robot": hand, "hand": side,

@@ -37,7 +37,8 @@ def run_inhand_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | No
     console.print(f"in-hand ({problem.robot.spec.file.parent.name}, {problem.hand} hand, seed {seed}): "
                   f"{stages}; total {st['planning_s']:.2f} s")
     console.print(f"GS_n tree: {st['nodes_generated']} configurations generated, {st['nodes_kept']} nodes kept "
-                  f"({st['iterations']} expansions); the start grasp lets {st['start_liftable']} fingers go")
+                  f"({st['iterations']} expansions, {st['trees']} tree(s)); the start grasp lets "
+                  f"{st['start_liftable']} fingers go")
     console.print(f"motion of {plan.duration:.1f} s: {st['transfers']} transfers, {st['regrasps']} finger regrasps "
                   f"(gaits), {sum(len(p.waypoints) for p in plan.phases)} waypoints; before smoothing "
                   f"{st['transfers_unsmoothed']} transfers, {st['regrasps_unsmoothed']} regrasps")

@@ -52,6 +52,26 @@ class RoadmapOptions:
     box_m: float = 0.02  # random targets within this of the start position (each axis)
     goal_carries: tuple[float, ...] = (1.0,)  # fractions of an edge a carry towards the goal tries, in turn
     regrasp_carry: bool = False  # an aimed regrasp carries the object one edge on at once
+    first_tree: int = 0  # >0: restart with a fresh tree (and start grasp) after this, then twice as many, ...
+
+
+def tree_budgets(total: int, first: int) -> list[int]:
+    """Expansions of each tree when ``total`` is spent on trees of ``first``, ``2 first``,
+    ``4 first``, ... expansions (the last gets the rest; one tree when ``first`` is 0).  A
+    tree that wandered into grasps it cannot turn the object from seldom recovers, while
+    most runs end early: restarts cut the long tail (a Luby-like schedule, doubling)."""
+    if first <= 0:
+        return [total]
+    out, b = [], first
+    while total - sum(out) > b:
+        out.append(b)
+        b *= 2
+    rest = total - sum(out)
+    if out and rest < out[-1] // 2:  # too short a tree: the last one gets it
+        out[-1] += rest
+    else:
+        out.append(rest)
+    return out
 
 
 @dataclass

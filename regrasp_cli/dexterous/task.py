@@ -26,7 +26,7 @@ from regrasp_cli.config import InhandSpec, ObstacleSpec, load_inhand_spec
 from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp
 from regrasp_cli.dexterous.gsn import GsConfig, GsOptions, GsScratch
 from regrasp_cli.dexterous.hand import reach, tip_targets
-from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, rlg_sample, start_config
+from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, rlg_sample, start_config, tree_budgets
 from regrasp_cli.dexterous.smooth import smooth
 from regrasp_cli.dexterous.surface import Surface
 from regrasp_cli.errors import InputError
@@ -172,14 +172,22 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
         out.failure = PlanningFailed(Stage.GRASPS, f"no force-closure grasp of the object at its start pose in "
                                                    f"{options.start_samples} samples")
         return _finish(out, s, stages, t0)
-    out.start = start
     t = perf_counter()
-    pieces, tree, st = grow(s, start, spec.X_GO_goal, rng, options, GaitOptions(gait_m=o.gait_m))
+    pieces, iterations, kept = None, 0, 0
+    for k, budget in enumerate(tree_budgets(options.nodes, options.first_tree)):
+        if k:  # a fresh tree from a fresh start grasp
+            start = given or start_config(s, spec.X_GO_start, rng, options) or start
+        out.start = start
+        pieces, _, st = grow(s, start, spec.X_GO_goal, rng, replace(options, nodes=budget),
+                             GaitOptions(gait_m=o.gait_m))
+        iterations, kept = iterations + st.iterations, kept + st.kept
+        if pieces is not None:
+            break
     stages["roadmap"] = perf_counter() - t
-    out.stats.update(nodes_kept=st.kept, iterations=st.iterations, start_liftable=st.start_liftable)
+    out.stats.update(nodes_kept=st.kept, iterations=iterations, trees=k + 1, start_liftable=st.start_liftable)
     if pieces is None:
-        out.failure = PlanningFailed(Stage.ROADMAP, f"the GS_n tree did not reach the goal pose in {st.iterations} "
-                                                    f"expansions ({st.kept} nodes)")
+        out.failure = PlanningFailed(Stage.ROADMAP, f"the GS_n tree did not reach the goal pose in {iterations} "
+                                                    f"expansions ({k + 1} trees, {kept} nodes)")
         return _finish(out, s, stages, t0)
     out.stats.update(regrasps_unsmoothed=sum(isinstance(p, Regrasp) for p in pieces),
                      transfers_unsmoothed=sum(not isinstance(p, Regrasp) for p in pieces))

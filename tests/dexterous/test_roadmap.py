@@ -18,7 +18,7 @@ from regrasp_cli.dexterous.gait import GaitOptions, Regrasp, Transfer, carry, fi
 from regrasp_cli.dexterous.gsn import GsScratch, gs_path
 from regrasp_cli.dexterous.hand import tip_targets
 from regrasp_cli.dexterous.roadmap import (RoadmapOptions, _reach_ahead, _turns, aimed_regrasp, grow, start_config,
-                                           step_towards)
+                                           step_towards, tree_budgets)
 from regrasp_cli.dexterous.smooth import smooth
 from regrasp_cli.dexterous.surface import Surface
 from regrasp_cli.grasp.single import HandModel
@@ -182,3 +182,15 @@ def test_smoothing_steps_a_finger_once_where_it_stepped_twice(gs):
     assert [type(p) for p in smoothed] == [Regrasp, Transfer]
     assert np.array_equal(smoothed[0].after.q, second.after.q)
     assert np.allclose(_assert_feasible(s, smoothed, start), _assert_feasible(s, pieces, start))
+
+
+@pytest.mark.parametrize("total, first", [(1500, 0), (1500, 150), (1500, 200), (100, 150), (1000, 1)])
+def test_tree_budgets_spend_the_budget_on_doubling_trees(total, first):
+    b = tree_budgets(total, first)
+    assert sum(b) == total and all(x > 0 for x in b)
+    if first == 0:
+        assert b == [total]
+    else:
+        assert b[0] == min(first, total)
+        assert all(b[k + 1] == 2 * b[k] for k in range(len(b) - 2))  # doubling, but the last
+        assert len(b) == 1 or b[-1] >= b[-2] // 2  # the last is not a stub
