@@ -52,7 +52,7 @@ class RoadmapOptions:
     box_m: float = 0.02  # random targets within this of the start position (each axis)
     goal_carries: tuple[float, ...] = (1.0,)  # fractions of an edge a carry towards the goal tries, in turn
     regrasp_carry: bool = False  # an aimed regrasp carries the object one edge on at once
-    first_tree: int = 0  # >0: restart with a fresh tree (and start grasp) after this, then twice as many, ...
+    first_tree: int = 150  # >0: restart with a fresh tree (and start grasp) after this, then twice as many, ...
 
 
 def tree_budgets(total: int, first: int) -> list[int]:
