@@ -208,11 +208,11 @@ def aimed_regrasp(s: GsScratch, c: GsConfig, X_goal: np.ndarray, rng: np.random.
                   g: GaitOptions, ahead: int = 3) -> list[Piece] | None:
     """A finger that may let go steps to the contact that lets the object turn furthest
     towards ``X_goal`` with every fingertip inside its workspace (up to ``ahead`` edges
-    of ``o.step_rad``), farther than the grasp now does, and the object is carried one
-    edge on (seed 003 §V's regrasp-transfer sequence); the first such step whose carry
-    fails is kept alone when none carries; None when no finger can step.  On a flat face
-    a random step seldom helps the next turn: the contacts the turn needs are where a
-    fingertip has room to follow them, and where its links clear the turning faces."""
+    of ``o.step_rad``), farther than the grasp now does; with ``o.regrasp_carry`` the
+    object is then carried one edge on (seed 003 §V's regrasp-transfer sequence; the
+    first step is kept alone when no carry goes).  None when no finger can step.  On a
+    flat face a random step seldom helps the next turn: the contacts the turn needs are
+    where a fingertip has room to follow them."""
     liftable = s.liftable(c)
     if not liftable:
         return None
@@ -296,8 +296,8 @@ def _expand(s: GsScratch, a: GsConfig, target: np.ndarray, to_goal: bool, rng: n
             o: RoadmapOptions, g: GaitOptions) -> list[Piece] | None:
     """Towards ``target``: slide the contacts (the GS_n path; first towards the goal, the
     fingers staying where they are), or carry the object with them fixed (towards the goal
-    a half and a quarter edge too: a cube's faces tilt into the fingers' links sooner than
-    a ball's); when neither goes, one finger regrasps."""
+    by each fraction of an edge in ``o.goal_carries`` in turn); when neither goes, one
+    finger regrasps, aimed at the goal's next turns when the target is the goal."""
     X_new = step_towards(a.X_GO, target, o.step_rad, o.step_m)
     for how in (0, 1) if to_goal else rng.permutation(2):
         s.generated += 1
