@@ -48,6 +48,7 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
+from regrasp_cli.errors import InputError
 from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
 from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collision_world
@@ -531,6 +532,11 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         from regrasp_cli.validate_inhand import validate_inhand
 
         return validate_inhand(plan, path, inputs, resolution)
+    mixed = next((k for k, p in enumerate(plan.phases) if p.kind.inhand), None)
+    if mixed is not None:
+        raise InputError(path, f"phases[{mixed}].kind", f"{plan.phases[mixed].kind.value} phases are checked in an "
+                                                        f"in-hand plan (task 'inhand') only: this version cannot "
+                                                        f"validate them in a {plan.task!r} plan")
     robot, reach, kin = inputs.robot, joint_reach(inputs.robot), Kinematics(inputs.robot)
     issues = [Issue(None, None, "input", note) for note in inputs.notes]
     carries, poses = follow(path, plan, kin)

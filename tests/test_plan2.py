@@ -14,8 +14,9 @@ validate` must accept it, reject it when the intermediate placement is moved (th
 would jump there), and `regrasp show` must draw its key frames, the second pick included.
 
 (b) Malformed plan/2 files (an unknown kind, a holding naming no grasp of the plan, a hand
-holding the object while it rests), an in-hand phase (which this version cannot replay)
-and a plan/1 file: one line naming the field, exit code 2, from `validate` and `show`.
+holding the object while it rests) and a plan/1 file: one line naming the field, exit
+code 2, from `validate` and `show`.  An in-hand phase in a pick-and-place plan: `validate`
+says in one line it checks those in in-hand plans only; `show` draws it.
 """
 
 from __future__ import annotations
@@ -217,8 +218,8 @@ def _holding_while_resting(d: dict) -> str:
 
 
 def _inhand(d: dict) -> str:
-    """The carry made an in-hand transfer (well-formed, object poses given): this version
-    cannot replay it, and says so rather than drawing or accepting something else."""
+    """The carry made an in-hand transfer (well-formed, object poses given): the validator
+    checks those in in-hand plans only, and says so rather than accepting it."""
     p = d["phases"][2]
     assert p["kind"] == "transfer"
     p.update(kind="inhand-transfer", holding={}, touching=["right"],
@@ -228,8 +229,7 @@ def _inhand(d: dict) -> str:
 
 BAD = {"unknown kind": (_unknown_kind, "expected one of transit, transfer, grasp, release, handover"),
        "unknown grasp id": (_unknown_grasp, "grasp id 'right-999' is not in grasps[]"),
-       "holding while resting": (_holding_while_resting, "rests at placement 'start' in a transit phase"),
-       "in-hand phase": (_inhand, "cannot be replayed by this version")}
+       "holding while resting": (_holding_while_resting, "rests at placement 'start' in a transit phase")}
 
 
 @pytest.mark.parametrize("command", ["validate", "show"])
@@ -246,6 +246,21 @@ def test_malformed_plan2_is_one_line_naming_the_field(regrasp, tmp_path, case, c
     line = assert_one_error_line(result, str(bad), f": {field}: ", words)
     assert isinstance(result.exception, SystemExit)
     assert result.stdout == "" and not frames.exists(), line
+
+
+def test_an_inhand_phase_in_a_pick_and_place_plan(regrasp, tmp_path):
+    """`validate` checks in-hand phases in in-hand plans only and says so in one line;
+    `show` draws such a phase, the object at its given poses."""
+    path, plan = regrasp
+    d = copy.deepcopy(plan)
+    field = _inhand(d)
+    bad = _write(path.parent / f"inhand-{tmp_path.name}.json", d)
+    result = run("validate", bad)
+    assert_one_error_line(result, str(bad), f": {field}: ", "in-hand plan (task 'inhand') only")
+    frames = tmp_path / "frames"
+    result = run("show", bad, "--png", frames)
+    assert result.exit_code == 0, result.output
+    assert (frames / "01_start.png").is_file()
 
 
 @pytest.mark.parametrize("command", ["validate", "show"])
