@@ -231,8 +231,9 @@ class InHandCarry:
 
     def X_WO(self, kin: Kinematics, q: np.ndarray) -> np.ndarray:
         """The pose at the point of the waypoint segments nearest ``q`` (nq,): the
-        position linearly, the rotation by the geodesic between the waypoints' (steps of
-        a tenth of a radian at most, so the first-order form's error is below 1e-3 rad)."""
+        position linearly, the rotation nearest the linear blend of the waypoints' (about
+        the same axis; exact at the ends and half-way, within 1e-3 rad of the geodesic's
+        for the tenth of a radian the validator allows between waypoints)."""
         if len(self.waypoints) == 1:
             return self.poses[0]
         a, d = self.waypoints[:-1], np.diff(self.waypoints, axis=0)
