@@ -24,6 +24,7 @@ Frames: the grasp frame G (fixed), the object frame O; metres, radians.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,6 +75,20 @@ class Regrasp:
 
 
 Piece = Transfer | Regrasp
+
+
+def reversed_piece(piece: Piece) -> Piece:
+    """The same motion backwards: quasi-static transfers and regrasps are reversible (a
+    finger that lifted off a contact and closed on another lifts off the second and
+    closes on the first, the others holding the object all along)."""
+    if isinstance(piece, Regrasp):
+        return Regrasp(piece.finger, piece.q[::-1].copy(), piece.after, piece.before)
+    return Transfer(piece.X_GO[::-1].copy(), piece.q[::-1].copy(), piece.p, piece.n)
+
+
+def reversed_path(pieces: list[Piece]) -> list[Piece]:
+    """The pieces from the last one's end back to the first one's start."""
+    return [reversed_piece(p) for p in reversed(pieces)]
 
 
 def _segment_free(s: GsScratch, q_a: np.ndarray, q_b: np.ndarray, finger: int, others: set[int],
@@ -196,6 +211,27 @@ def reduce_path(s: GsScratch, path: list[GsConfig], rng: np.random.Generator,
         state, synced = (steps[-1].after if steps else carried[j - synced]), j
         if j == end:
             return pieces
+
+
+def regrasp_to(s: GsScratch, c: GsConfig, end: GsConfig, rng: np.random.Generator, o: GaitOptions = GaitOptions(),
+               first: list[int] | None = None, orders: int = 24) -> list[Regrasp] | None:
+    """Regrasps from ``c`` to ``end``'s contacts and joints, the object still at their
+    (common) pose: one step per finger whose joints differ, straight to its contact in
+    ``end``, in the first order that is feasible (``first``, then the fingers' other
+    orders, ``orders`` at most); None when none is."""
+    idx = s.hm.hand.finger_idx
+    moved = [f for f in range(len(c.p)) if not np.array_equal(c.q[idx[f]], end.q[idx[f]])]
+    for order in itertools.islice(itertools.chain([first or moved], itertools.permutations(moved)), orders + 1):
+        state, steps = c, []
+        for f in order:
+            step = finger_step(s, state, f, end.p[f], end.n[f], rng, o, q_down=end.q)
+            if step is None:
+                break
+            steps.append(step)
+            state = step.after
+        else:
+            return steps
+    return None
 
 
 def _backoff(synced: int, last: int) -> list[int]:

@@ -30,7 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp, carry, finger_step, reduce_path
+from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp, carry, finger_step, reduce_path, regrasp_to, \
+    reversed_path
 from regrasp_cli.dexterous.gsn import GsConfig, GsScratch, gs_path
 from regrasp_cli.dexterous.hand import reach, tip_targets
 from regrasp_cli.spatial import inverse
@@ -53,6 +54,10 @@ class RoadmapOptions:
     goal_carries: tuple[float, ...] = (1.0,)  # fractions of an edge a carry towards the goal tries, in turn
     regrasp_carry: bool = False  # an aimed regrasp carries the object one edge on at once
     first_tree: int = 150  # >0: restart with a fresh tree (and start grasp) after this, then twice as many, ...
+    goal_tree: bool = True  # grow a second tree from a grasp at the goal pose and join the two
+    connect_rad: float = 0.35  # try to join nodes of the two trees this close (rad, :func:`_distance`)
+    connect_orders: int = 6  # finger orders a join's regrasps try
+    aim_newest: bool = True  # each tree aims at the other's newest node (RRT-Connect), not at its root
 
 
 def tree_budgets(total: int, first: int) -> list[int]:
@@ -352,3 +357,77 @@ def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Gener
             return tree.path(j), tree, stats
     stats.kept = len(tree.nodes)
     return None, tree, stats
+
+
+def connect(s: GsScratch, a: GsConfig, b: GsConfig, rng: np.random.Generator, o: RoadmapOptions,
+            g: GaitOptions) -> list[Piece] | None:
+    """Transfers and regrasps from ``a`` to ``b`` (seed 003 §V's transfer-regrasp and
+    regrasp-transfer sequences that link two GS_n configurations): the object carried to
+    b's pose on a's contacts, then each finger stepping to b's contact; or each finger
+    stepping first, at a's pose, to b's contacts carried there, then the object carried to
+    b.  None when neither goes."""
+    t = carry(s, a, b.X_GO, rng, s.options.step_m, s.options.step_rad, g)
+    if t is not None:
+        steps = regrasp_to(s, t.end, b, rng, g, orders=o.connect_orders)
+        if steps is not None:
+            return [t] + steps
+    back = carry(s, b, a.X_GO, rng, s.options.step_m, s.options.step_rad, g)
+    if back is not None:
+        steps = regrasp_to(s, a, back.end, rng, g, orders=o.connect_orders)
+        if steps is not None:
+            return steps + reversed_path([back])
+    return None
+
+
+def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.Generator,
+                 o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions()
+                 ) -> tuple[list[Piece] | None, tuple[Tree, Tree], RoadmapStats]:
+    """Two trees, from ``start`` and from ``goal`` (a grasp at the goal pose), grown in
+    turn, each towards the other's root pose or a random one, as :func:`grow` does; a new
+    node is joined to the other tree's nodes within ``o.connect_rad`` (:func:`connect`).
+    The start tree's path to its node, the join and the goal tree's path reversed: the
+    transfers and regrasps from the start to ``goal``; or None within ``o.nodes``
+    expansions.  (The single-query version of §V adds both configurations to the graph;
+    our goal is a pose, any grasp there will do, so ``goal`` is one such grasp, and a
+    start-tree node at the goal pose ends the search as in :func:`grow`.)"""
+    trees = (Tree(), Tree())
+    trees[0].add(start, -1, [])
+    trees[1].add(goal, -1, [])
+    aims = (goal.X_GO, start.X_GO)
+    stats = RoadmapStats(start_liftable=len(s.liftable(start)))
+    goal_fails: tuple[dict[int, int], dict[int, int]] = ({}, {})
+    for it in range(o.nodes):
+        stats.iterations = it + 1
+        k = it % 2
+        tree, other = trees[k], trees[1 - k]
+        to_goal = rng.random() < o.goal_bias
+        aim = other.nodes[-1].X_GO if o.aim_newest else aims[k]
+        target = aim if to_goal else _random_pose(tree.nodes[0].X_GO, o.box_m, rng)
+        d = _distances(np.array([c.X_GO for c in tree.nodes]), target, s.rho) + 1e-9 * rng.random(len(tree.nodes))
+        if to_goal:
+            d[[i for i, n in goal_fails[k].items() if n >= 2]] = np.inf
+            if np.isinf(d).all():
+                continue
+        i = int(np.argmin(d))
+        pieces = _expand(s, tree.nodes[i], target, to_goal, rng, o, g)
+        if not pieces:
+            if to_goal:
+                goal_fails[k][i] = goal_fails[k].get(i, 0) + 1
+            continue
+        j = tree.add(pieces[-1].end, i, pieces)
+        new = tree.nodes[j]
+        if k == 0 and _distance(new.X_GO, goal.X_GO, s.rho) < 1e-9:
+            stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
+            return tree.path(j), trees, stats
+        d = _distances(np.array([c.X_GO for c in other.nodes]), new.X_GO, s.rho)
+        for m in np.argsort(d)[:2]:
+            if d[m] > o.connect_rad:
+                break
+            s.generated += 1
+            a, b = (j, int(m)) if k == 0 else (int(m), j)
+            link = connect(s, trees[0].nodes[a], trees[1].nodes[b], rng, o, g)
+            if link is not None:
+                stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
+                return trees[0].path(a) + link + reversed_path(trees[1].path(b)), trees, stats
+    stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
+    return None, trees, stats

@@ -15,11 +15,9 @@ Consecutive transfers are joined into one (the object moves on, the same contact
 
 from __future__ import annotations
 
-import itertools
-
 import numpy as np
 
-from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp, Transfer, finger_step
+from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp, Transfer, regrasp_to
 from regrasp_cli.dexterous.gsn import GsScratch
 
 MAX_ORDERS = 24  # orders of the fingers tried per run of regrasps (4! for four fingers)
@@ -33,18 +31,8 @@ def _shorter_run(s: GsScratch, run: list[Regrasp], rng: np.random.Generator, o: 
     if len(moved) >= len(run):
         return run
     last = {r.finger: k for k, r in enumerate(run)}
-    first = sorted(moved, key=lambda f: last.get(f, -1))
-    for order in itertools.islice(itertools.chain([first], itertools.permutations(moved)), MAX_ORDERS + 1):
-        c, steps = start, []
-        for f in order:
-            step = finger_step(s, c, f, end.p[f], end.n[f], rng, o, q_down=end.q)
-            if step is None:
-                break
-            steps.append(step)
-            c = step.after
-        else:
-            return steps
-    return run
+    shorter = regrasp_to(s, start, end, rng, o, sorted(moved, key=lambda f: last.get(f, -1)), MAX_ORDERS)
+    return run if shorter is None else shorter
 
 
 def _joined(a: Transfer, b: Transfer) -> Transfer:

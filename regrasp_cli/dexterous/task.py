@@ -26,7 +26,7 @@ from regrasp_cli.config import InhandSpec, ObstacleSpec, load_inhand_spec
 from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp
 from regrasp_cli.dexterous.gsn import GsConfig, GsOptions, GsScratch
 from regrasp_cli.dexterous.hand import reach, tip_targets
-from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, rlg_sample, start_config, tree_budgets
+from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, grow_connect, start_config, tree_budgets
 from regrasp_cli.dexterous.smooth import smooth
 from regrasp_cli.dexterous.surface import Surface
 from regrasp_cli.errors import InputError
@@ -163,9 +163,7 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
     stages = {"setup": perf_counter() - t0}
     t = perf_counter()
     given = given_start(problem, s, rng) if spec.start_grasp else None
-    if not any(rlg_sample(s, spec.X_GO_goal, rng, options.candidates) for _ in range(GOAL_PROBES)):
-        raise InputError(spec.file, "object_goal", f"no grasp of the {problem.hand} hand holds the object at this "
-                                                   f"pose ({GOAL_PROBES} samples): the fingers cannot reach it there")
+    goal = goal_config(problem, s, rng, options)
     start = given or start_config(s, spec.X_GO_start, rng, options)
     stages["start grasp"] = perf_counter() - t
     if start is None:
@@ -175,11 +173,15 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
     t = perf_counter()
     pieces, iterations, kept = None, 0, 0
     for k, budget in enumerate(tree_budgets(options.nodes, options.first_tree)):
-        if k:  # a fresh tree from a fresh start grasp
+        if k:  # fresh trees from fresh start and goal grasps
             start = given or start_config(s, spec.X_GO_start, rng, options) or start
+            goal = start_config(s, spec.X_GO_goal, rng, replace(options, start_samples=GOAL_PROBES)) or goal
         out.start = start
-        pieces, _, st = grow(s, start, spec.X_GO_goal, rng, replace(options, nodes=budget),
-                             GaitOptions(gait_m=o.gait_m))
+        budgeted, gait = replace(options, nodes=budget), GaitOptions(gait_m=o.gait_m)
+        if options.goal_tree:
+            pieces, _, st = grow_connect(s, start, goal, rng, budgeted, gait)
+        else:
+            pieces, _, st = grow(s, start, spec.X_GO_goal, rng, budgeted, gait)
         iterations, kept = iterations + st.iterations, kept + st.kept
         if pieces is not None:
             break
@@ -197,6 +199,17 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
         stages["smoothing"] = perf_counter() - t
     out.pieces = pieces
     return _finish(out, s, stages, t0)
+
+
+def goal_config(problem: InhandProblem, s: GsScratch, rng: np.random.Generator, o: RoadmapOptions) -> GsConfig:
+    """The goal tree's root: the best of ``GOAL_PROBES`` RLG samples at the goal pose
+    (:func:`roadmap.start_config`); InputError when none holds the object there."""
+    spec = problem.spec
+    goal = start_config(s, spec.X_GO_goal, rng, replace(o, start_samples=GOAL_PROBES))
+    if goal is None:
+        raise InputError(spec.file, "object_goal", f"no grasp of the {problem.hand} hand holds the object at this "
+                                                   f"pose ({GOAL_PROBES} samples): the fingers cannot reach it there")
+    return goal
 
 
 def _finish(out: InhandOutcome, s: GsScratch, stages: dict, t0: float) -> InhandOutcome:

@@ -14,11 +14,11 @@ from scipy.spatial.transform import Rotation
 
 from conftest import ROOT
 
-from regrasp_cli.dexterous.gait import GaitOptions, Regrasp, Transfer, carry, finger_step, reduce_path
+from regrasp_cli.dexterous.gait import GaitOptions, Regrasp, Transfer, carry, finger_step, reduce_path, reversed_path
 from regrasp_cli.dexterous.gsn import GsScratch, gs_path
 from regrasp_cli.dexterous.hand import tip_targets
-from regrasp_cli.dexterous.roadmap import (RoadmapOptions, _reach_ahead, _turns, aimed_regrasp, grow, start_config,
-                                           step_towards, tree_budgets)
+from regrasp_cli.dexterous.roadmap import (RoadmapOptions, _reach_ahead, _turns, aimed_regrasp, connect, grow,
+                                           grow_connect, start_config, step_towards, tree_budgets)
 from regrasp_cli.dexterous.smooth import smooth
 from regrasp_cli.dexterous.surface import Surface
 from regrasp_cli.grasp.single import HandModel
@@ -91,6 +91,51 @@ def test_the_tree_turns_a_sphere_by_finger_gaiting(gs):
     assert np.allclose(end, goal, atol=1e-9)
     kinds = {type(p) for p in pieces}
     assert kinds == {Transfer, Regrasp}  # it had to gait: the fingers alone cannot turn it 1.3 rad
+
+
+def test_two_trees_turn_a_sphere_from_the_start_grasp_to_a_grasp_at_the_goal(gs):
+    """The goal tree's path is run backwards: the whole path starts at the start grasp, is
+    feasible piece by piece, and ends exactly on the goal tree's root grasp."""
+    s = gs
+    rng = np.random.default_rng(6)
+    o = RoadmapOptions(nodes=300)
+    start = start_config(s, np.eye(4), rng, o)
+    goal = start_config(s, _goal(2.5, [0.3, 1.0, -0.4]), rng, o)
+    pieces, trees, stats = grow_connect(s, start, goal, rng, o)
+    assert pieces is not None and len(trees[1].nodes) >= 2  # the goal tree grew
+    assert np.allclose(_assert_feasible(s, pieces, start), goal.X_GO, atol=1e-9)
+    assert np.allclose(pieces[-1].q[-1], goal.q) and np.allclose(pieces[-1].end.p, goal.p)
+
+
+def test_a_path_run_backwards_is_feasible_from_its_end(gs):
+    s = gs
+    rng = np.random.default_rng(7)
+    o = RoadmapOptions(nodes=60)
+    start = start_config(s, np.eye(4), rng, o)
+    pieces, _, _ = grow(s, start, _goal(0.8, [0, 1, 0]), rng, o)
+    assert pieces is not None and {type(p) for p in pieces} == {Transfer, Regrasp}
+    back = reversed_path(pieces)
+    assert np.allclose(_assert_feasible(s, back, pieces[-1].end), start.X_GO)
+    assert np.allclose(back[-1].q[-1], start.q)
+
+
+def test_two_grasps_at_nearby_poses_are_joined_by_a_transfer_and_regrasps(gs):
+    """§V's transfer-regrasp sequence between two GS_n configurations: it ends exactly on
+    the second one (pose, contacts and joints)."""
+    s = gs
+    rng = np.random.default_rng(8)
+    o = RoadmapOptions()
+    a = start_config(s, np.eye(4), rng, o)
+    joined = 0
+    for k in range(6):
+        b = start_config(s, _goal(0.2, [1.0, k, 0.5]), rng, RoadmapOptions(start_samples=10))
+        link = None if b is None else connect(s, a, b, rng, o, GaitOptions())
+        if link is None:
+            continue
+        joined += 1
+        assert np.allclose(_assert_feasible(s, link, a), b.X_GO)
+        assert np.allclose(link[-1].q[-1], b.q) and np.allclose(link[-1].end.p, b.p)
+    assert joined >= 2
 
 
 def test_a_gs_n_path_reduces_to_transfers_and_regrasps_near_it(gs):
