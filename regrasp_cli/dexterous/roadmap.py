@@ -1,24 +1,27 @@
-"""The GS_n roadmap, single-query (seed 003 §V): a tree of GS_n configurations grown from
-the start towards the goal pose, whose edges are linear paths in GS_n.
+"""The GS_n roadmap, single-query (seed 003 §V): trees of GS_n configurations grown from
+the start grasp and from a grasp at the goal pose, whose edges are linear paths in GS_n
+reduced to transfers and regrasps, joined by transfer-regrasp sequences.
 
 Nodes are sampled the RLG way (§V, :func:`rlg_sample`): with the object's pose given,
 each finger's contact is drawn among the surface points inside the finger's workspace
 whose normal faces the closing fingertip, and its joints follow by IK; a sample is kept
 when the hand does not collide (finger-finger, finger-object, object-palm) and the
 contacts are force closure.  The start's grasp is the best of such samples at the start
-pose: most fingers that may let go, then the finger joints farthest from their limits.
+pose: most fingers that may let go, then the finger joints farthest from their limits;
+the goal tree's root is chosen the same way at the goal pose.
 
-An edge (:func:`extend`) turns and moves the object from a node towards a target pose by
+An edge (:func:`slide`) turns and moves the object from a node towards a target pose by
 at most ``step_rad`` and ``step_m``, each contact sliding along the geodesic to the
 surface point nearest where its fingertip is (the fingers stay where they are in the hand
 as far as the surface allows), every step checked by :func:`gsn.gs_path` (IK, joint step,
 collisions, force closure of all fingers and of every n-1 of them whose contact moves).
-Targets are the goal pose (probability ``goal_bias``) or a random pose; the tree's node
-nearest the target extends.  The paper builds a roadmap of GS_n's connected components
-and links them by regrasp-transfer sequences; for the reorientations we plan, GS_n around
-the start is one component (a sphere's, as the paper says, always is), so the tree stays
-in it, and a node that reaches the goal pose ends the query.  The goal is a pose only:
-any grasp at it will do (seed 003 §IV's final grasp is the one the path arrives with).
+Targets are the other tree's newest node (probability ``goal_bias``; with one tree, the
+goal pose) or a random pose; the tree's node nearest the target extends.  The paper
+builds a roadmap of GS_n's connected components and links them by regrasp-transfer
+sequences: :func:`connect` is that link, between a node of each tree within
+``connect_rad``; the goal tree's path is then run backwards.  The goal is a pose only:
+any grasp at it will do, so a start-tree node at the goal pose ends the query too (seed
+003 §IV's final grasp is the one the path arrives with).
 
 Frames: the grasp frame G (fixed), the object frame O; metres, radians.
 """
@@ -325,6 +328,25 @@ def _expand(s: GsScratch, a: GsConfig, target: np.ndarray, to_goal: bool, rng: n
     return None if r is None else [r]
 
 
+def _extend(s: GsScratch, tree: Tree, target: np.ndarray, to_goal: bool, goal_fails: dict[int, int],
+            rng: np.random.Generator, o: RoadmapOptions, g: GaitOptions) -> int | None:
+    """Expand the tree's node nearest ``target`` (towards the goal: of those that failed it
+    less than twice; ties, a regrasp keeping the pose, broken at random) and add the node
+    it reaches: its index, or None.  ``goal_fails`` counts the failures towards the goal."""
+    d = _distances(np.array([c.X_GO for c in tree.nodes]), target, s.rho) + 1e-9 * rng.random(len(tree.nodes))
+    if to_goal:
+        d[[k for k, n in goal_fails.items() if n >= 2]] = np.inf
+        if np.isinf(d).all():
+            return None
+    i = int(np.argmin(d))
+    pieces = _expand(s, tree.nodes[i], target, to_goal, rng, o, g)
+    if not pieces:
+        if to_goal:
+            goal_fails[i] = goal_fails.get(i, 0) + 1
+        return None
+    return tree.add(pieces[-1].end, i, pieces)
+
+
 def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Generator,
          o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions()
          ) -> tuple[list[Piece] | None, Tree, RoadmapStats]:
@@ -338,20 +360,9 @@ def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Gener
         stats.iterations = it + 1
         to_goal = rng.random() < o.goal_bias
         target = X_goal if to_goal else _random_pose(start.X_GO, o.box_m, rng)
-        # nearest node (towards the goal: of those that failed it less than twice), ties
-        # (a regrasp keeps the pose) broken at random
-        d = _distances(np.array([c.X_GO for c in tree.nodes]), target, s.rho) + 1e-9 * rng.random(len(tree.nodes))
-        if to_goal:
-            d[[k for k, n in goal_fails.items() if n >= 2]] = np.inf
-            if np.isinf(d).all():
-                continue
-        i = int(np.argmin(d))
-        pieces = _expand(s, tree.nodes[i], target, to_goal, rng, o, g)
-        if not pieces:
-            if to_goal:
-                goal_fails[i] = goal_fails.get(i, 0) + 1
+        j = _extend(s, tree, target, to_goal, goal_fails, rng, o, g)
+        if j is None:
             continue
-        j = tree.add(pieces[-1].end, i, pieces)
         if _distance(tree.nodes[j].X_GO, X_goal, s.rho) < 1e-9:
             stats.kept = len(tree.nodes)
             return tree.path(j), tree, stats
@@ -383,11 +394,12 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
                  o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions()
                  ) -> tuple[list[Piece] | None, tuple[Tree, Tree], RoadmapStats]:
     """Two trees, from ``start`` and from ``goal`` (a grasp at the goal pose), grown in
-    turn, each towards the other's root pose or a random one, as :func:`grow` does; a new
-    node is joined to the other tree's nodes within ``o.connect_rad`` (:func:`connect`).
-    The start tree's path to its node, the join and the goal tree's path reversed: the
-    transfers and regrasps from the start to ``goal``; or None within ``o.nodes``
-    expansions.  (The single-query version of §V adds both configurations to the graph;
+    turn as :func:`grow` grows one, each towards the other's newest node (RRT-Connect's
+    aim; with ``o.aim_newest`` off, the other's root pose) or a random pose; a new node is
+    joined to the other tree's two nearest nodes within ``o.connect_rad``
+    (:func:`connect`).  The start tree's path to its node, the join and the goal tree's
+    path reversed: the transfers and regrasps from the start to ``goal`` (or to another
+    grasp at its pose); or None within ``o.nodes`` expansions.  (The single-query version of §V adds both configurations to the graph;
     our goal is a pose, any grasp there will do, so ``goal`` is one such grasp, and a
     start-tree node at the goal pose ends the search as in :func:`grow`.)"""
     trees = (Tree(), Tree())
@@ -403,18 +415,9 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
         to_goal = rng.random() < o.goal_bias
         aim = other.nodes[-1].X_GO if o.aim_newest else aims[k]
         target = aim if to_goal else _random_pose(tree.nodes[0].X_GO, o.box_m, rng)
-        d = _distances(np.array([c.X_GO for c in tree.nodes]), target, s.rho) + 1e-9 * rng.random(len(tree.nodes))
-        if to_goal:
-            d[[i for i, n in goal_fails[k].items() if n >= 2]] = np.inf
-            if np.isinf(d).all():
-                continue
-        i = int(np.argmin(d))
-        pieces = _expand(s, tree.nodes[i], target, to_goal, rng, o, g)
-        if not pieces:
-            if to_goal:
-                goal_fails[k][i] = goal_fails[k].get(i, 0) + 1
+        j = _extend(s, tree, target, to_goal, goal_fails[k], rng, o, g)
+        if j is None:
             continue
-        j = tree.add(pieces[-1].end, i, pieces)
         new = tree.nodes[j]
         if k == 0 and _distance(new.X_GO, goal.X_GO, s.rho) < 1e-9:
             stats.kept = len(trees[0].nodes) + len(trees[1].nodes)

@@ -9,8 +9,8 @@ Input that cannot work is refused before planning with an :class:`InputError` na
 field: a hand with fewer than three fingertips, an object wider at its narrowest than the
 fingertips can open, a start grasp that is not force closure, a goal pose at which no
 grasp of the hand holds the object.  A planning failure names its stage: ``grasps`` (no
-force-closure grasp found at the start pose) or ``roadmap`` (the tree did not reach the
-goal within its budget).
+force-closure grasp found at the start pose) or ``roadmap`` (the start and goal trees did
+not join within their budget).
 """
 
 from __future__ import annotations
@@ -188,8 +188,9 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
     stages["roadmap"] = perf_counter() - t
     out.stats.update(nodes_kept=st.kept, iterations=iterations, trees=k + 1, start_liftable=st.start_liftable)
     if pieces is None:
-        out.failure = PlanningFailed(Stage.ROADMAP, f"the GS_n tree did not reach the goal pose in {iterations} "
-                                                    f"expansions ({k + 1} trees, {kept} nodes)")
+        what = "the start and goal trees did not join" if options.goal_tree else "the tree did not reach the goal pose"
+        out.failure = PlanningFailed(Stage.ROADMAP, f"{what} in GS_n in {iterations} expansions ({k + 1} "
+                                                    f"{'pairs of trees' if options.goal_tree else 'trees'}, {kept} nodes)")
         return _finish(out, s, stages, t0)
     out.stats.update(regrasps_unsmoothed=sum(isinstance(p, Regrasp) for p in pieces),
                      transfers_unsmoothed=sum(not isinstance(p, Regrasp) for p in pieces))
