@@ -239,3 +239,19 @@ def test_tree_budgets_spend_the_budget_on_doubling_trees(total, first):
         assert b[0] == min(first, total)
         assert all(b[k + 1] == 2 * b[k] for k in range(len(b) - 2))  # doubling, but the last
         assert len(b) == 1 or b[-1] >= b[-2] // 2  # the last is not a stub
+
+
+def test_a_step_whose_other_fingers_hold_only_at_the_boundary_is_refused(gs, monkeypatch):
+    """The quick closure test (no epsilon) says the others hold; the exact one, with the
+    validator's margin, says they do not: the step is not kept."""
+    s = gs
+    rng = np.random.default_rng(9)
+    start = start_config(s, np.eye(4), rng, RoadmapOptions())
+    f = next(iter(s.liftable(start)))
+    target = next(k for k in rng.permutation(len(s.sampled.points))
+                  if 0.004 < np.linalg.norm(s.sampled.points[k] - start.p[f]) < 0.012
+                  and finger_step(s, start, f, s.sampled.points[k], s.sampled.normals[k],
+                                  np.random.default_rng(1)) is not None)
+    monkeypatch.setattr(s, "closure", lambda p, n, without=None: 0.0)
+    assert finger_step(s, start, f, s.sampled.points[target], s.sampled.normals[target],
+                       np.random.default_rng(1)) is None
