@@ -399,9 +399,10 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
     joined to the other tree's two nearest nodes within ``o.connect_rad``
     (:func:`connect`).  The start tree's path to its node, the join and the goal tree's
     path reversed: the transfers and regrasps from the start to ``goal`` (or to another
-    grasp at its pose); or None within ``o.nodes`` expansions.  (The single-query version of §V adds both configurations to the graph;
-    our goal is a pose, any grasp there will do, so ``goal`` is one such grasp, and a
-    start-tree node at the goal pose ends the search as in :func:`grow`.)"""
+    grasp at its pose); or None within ``o.nodes`` expansions.  (The single-query version
+    of §V adds both configurations to the graph; our goal is a pose, any grasp there will
+    do, so ``goal`` is one such grasp, and a start-tree node at the goal pose ends the
+    search as in :func:`grow`.)"""
     trees = (Tree(), Tree())
     trees[0].add(start, -1, [])
     trees[1].add(goal, -1, [])
@@ -419,8 +420,8 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
         if j is None:
             continue
         new = tree.nodes[j]
+        stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
         if k == 0 and _distance(new.X_GO, goal.X_GO, s.rho) < 1e-9:
-            stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
             return tree.path(j), trees, stats
         d = _distances(np.array([c.X_GO for c in other.nodes]), new.X_GO, s.rho)
         for m in np.argsort(d)[:2]:
@@ -430,7 +431,6 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
             a, b = (j, int(m)) if k == 0 else (int(m), j)
             link = connect(s, trees[0].nodes[a], trees[1].nodes[b], rng, o, g)
             if link is not None:
-                stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
                 return trees[0].path(a) + link + reversed_path(trees[1].path(b)), trees, stats
     stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
     return None, trees, stats
