@@ -261,17 +261,33 @@ def inhand() -> None:
 @click.option("--no-timings", is_flag=True,
               help="Leave wall-clock times out of the plan, so that the same seed writes the same bytes.")
 @click.option("--no-check", is_flag=True, help="Skip the independent validation of the written plan.")
+@click.option("--mode", type=click.Choice(["single-query", "multi-query"]), default=None,
+              help="Override the scene's planning.mode: trees from the start and goal, or the learned roadmap "
+                   "(`regrasp inhand roadmap`, built first when missing).")
 @cache_option
 @click.pass_context
 def inhand_plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, no_timings: bool,
-                no_check: bool) -> None:
+                no_check: bool, mode: str | None) -> None:
     """Plan the finger gaits that turn the object held in the hand's fingertips from its
     start to its goal pose (format regrasp.inhand/1); write the plan JSON.
 
     Exits 0 when solved, 1 with the failing stage and reason when not."""
     from regrasp_cli.commands.inhand import run_inhand_plan
 
-    run_inhand_plan(scene, ctx.obj["cache_dir"], output, seed, not no_timings, not no_check)
+    run_inhand_plan(scene, ctx.obj["cache_dir"], output, seed, not no_timings, not no_check, mode=mode)
+
+
+@inhand.command("roadmap")
+@click.argument("scene", type=click.Path(path_type=Path))
+@cache_option
+@click.pass_context
+def inhand_roadmap(ctx: click.Context, scene: Path) -> None:
+    """Learn the multi-query GS_n roadmap (seed 003 §V) for the scene's hand, object,
+    friction and placement, and cache it; queries with `--mode multi-query` (or
+    planning.mode: multi-query) use it.  Exits 1 when no grasp joined the roadmap."""
+    from regrasp_cli.commands.inhand import run_inhand_roadmap
+
+    run_inhand_roadmap(scene, ctx.obj["cache_dir"])
 
 
 @main.command()

@@ -595,18 +595,24 @@ def _robot_conf(t: Fields, key: str) -> str | Mapping[str, float]:
 INHAND_FORMAT = "regrasp.inhand/1"
 
 
+INHAND_MODES = ("single-query", "multi-query")
+
+
 @dataclass(frozen=True)
 class InhandPlanning:
     """Options of the in-hand planner (seed 003): ``nodes`` the tree's budget of
     expansions, ``step_rad`` the object's turn per edge, ``gait_m`` the contact drift
     before a finger steps (metres, radians), ``smooth`` whether runs of finger steps are
-    shortened (:mod:`regrasp_cli.dexterous.smooth`)."""
+    shortened (:mod:`regrasp_cli.dexterous.smooth`); ``mode`` single-query (trees from
+    the start and the goal) or multi-query (the learned roadmap of
+    :mod:`regrasp_cli.dexterous.multiquery`, built and cached when missing)."""
 
     seed: int = 0
     nodes: int = 1500
     step_rad: float = 0.35
     gait_m: float = 0.012
     smooth: bool = True
+    mode: str = "single-query"
 
 
 @dataclass(frozen=True)
@@ -655,10 +661,13 @@ def load_inhand_spec(path: str | Path) -> InhandSpec:
     planning = InhandPlanning()
     if f.has("planning"):
         p = f.sub("planning")
-        p.only("seed", "nodes", "step_rad", "gait_m", "smooth")
+        p.only("seed", "nodes", "step_rad", "gait_m", "smooth", "mode")
+        mode = p.str("mode", planning.mode)
+        if mode not in INHAND_MODES:
+            raise p.error("mode", f"expected one of {', '.join(INHAND_MODES)}, found {mode!r}")
         planning = InhandPlanning(p.int("seed", planning.seed, minimum=0), p.int("nodes", planning.nodes, minimum=1),
                                   p.float("step_rad", planning.step_rad, positive=True, maximum=3.2),
                                   p.float("gait_m", planning.gait_m, positive=True),
-                                  p.bool("smooth", planning.smooth))
+                                  p.bool("smooth", planning.smooth), mode)
     return InhandSpec(file, robot, hand, _robot_conf(f, "robot_config"), obj, start, goal, grasp, planning,
                       _obstacles(f))

@@ -4,6 +4,7 @@ the command reports success."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from rich.console import Console
@@ -15,7 +16,7 @@ from regrasp_cli.trajectory import write_plan
 
 
 def run_inhand_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, timings: bool, check: bool,
-                    console: Console | None = None) -> int:
+                    console: Console | None = None, mode: str | None = None) -> int:
     """The `inhand plan` command; returns 0 when solved, raises the outcome's
     PlanningFailed (exit 1) when not."""
     from regrasp_cli.commands.validate import check_written
@@ -23,8 +24,11 @@ def run_inhand_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | No
     console = console or Console()
     check_writable(out_file, "--output")
     problem = load_inhand_problem(scene, cache_dir)
+    if mode is not None:
+        problem = replace(problem, spec=replace(problem.spec, planning=replace(problem.spec.planning, mode=mode)))
     seed = problem.spec.planning.seed if seed is None else seed
-    with console.status("planning the finger gaits"):
+    with console.status("planning the finger gaits" + (" (building the roadmap if missing)"
+                                                       if problem.spec.planning.mode == "multi-query" else "")):
         out = plan_inhand(problem, cache_dir, seed)
     plan = make_inhand_plan(problem, out, seed, out_file, cache_dir, timings)
     write_plan(out_file, plan)
@@ -45,4 +49,27 @@ def run_inhand_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | No
     if check:
         check_written(out_file, console)
     console.print(f"plan: {out_file}")
+    return 0
+
+
+def run_inhand_roadmap(scene: Path, cache_dir: Path, console: Console | None = None) -> int:
+    """The `inhand roadmap` command: learn (or find fresh in the cache) the roadmap."""
+    from time import perf_counter
+
+    from rich.progress import Progress
+
+    from regrasp_cli.dexterous.task import inhand_roadmap
+
+    console = console or Console()
+    problem = load_inhand_problem(scene, cache_dir)
+    t = perf_counter()
+    with Progress(console=console, transient=True) as bar:
+        task = bar.add_task("learning the GS_n roadmap (grasps joined)", total=None)
+        rm, st, built = inhand_roadmap(problem, cache_dir, progress=lambda k, n: bar.update(task, completed=k, total=n))
+    edges = len(rm.edges)
+    if not built:
+        console.print(f"roadmap fresh in the cache: {len(rm.nodes)} nodes, {edges} edges")
+        return 0
+    console.print(f"roadmap learned in {perf_counter() - t:.1f} s: {st.joined} of {st.roots} grasps at random "
+                  f"orientations joined, {len(rm.nodes)} nodes, {edges} edges ({st.expansions} expansions)")
     return 0

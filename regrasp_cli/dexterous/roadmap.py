@@ -393,11 +393,8 @@ def connect(s: GsScratch, a: GsConfig, b: GsConfig, rng: np.random.Generator, o:
 def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.Generator,
                  o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions()
                  ) -> tuple[list[Piece] | None, tuple[Tree, Tree], RoadmapStats]:
-    """Two trees, from ``start`` and from ``goal`` (a grasp at the goal pose), grown in
-    turn as :func:`grow` grows one, each towards the other's newest node (RRT-Connect's
-    aim; with ``o.aim_newest`` off, the other's root pose) or a random pose; a new node is
-    joined to the other tree's two nearest nodes within ``o.connect_rad``
-    (:func:`connect`).  The start tree's path to its node, the join and the goal tree's
+    """Two trees, from ``start`` and from ``goal`` (a grasp at the goal pose), grown by
+    :func:`join_trees`: the start tree's path to its node, the join and the goal tree's
     path reversed: the transfers and regrasps from the start to ``goal`` (or to another
     grasp at its pose); or None within ``o.nodes`` expansions.  (The single-query version
     of §V adds both configurations to the graph; our goal is a pose, any grasp there will
@@ -406,11 +403,28 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
     trees = (Tree(), Tree())
     trees[0].add(start, -1, [])
     trees[1].add(goal, -1, [])
-    aims = (goal.X_GO, start.X_GO)
     stats = RoadmapStats(start_liftable=len(s.liftable(start)))
+    joined = join_trees(s, trees, rng, o, g, stats, at_goal=True)
+    stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
+    if joined is None:
+        return None, trees, stats
+    a, b, link = joined
+    return trees[0].path(a) + link + reversed_path(trees[1].path(b)), trees, stats
+
+
+def join_trees(s: GsScratch, trees: tuple[Tree, Tree], rng: np.random.Generator, o: RoadmapOptions,
+               g: GaitOptions, stats: RoadmapStats, at_goal: bool = False) -> tuple[int, int, list[Piece]] | None:
+    """Grow the two trees in turn as :func:`grow` grows one, each towards the other's
+    newest node (RRT-Connect's aim; with ``o.aim_newest`` off, the other's root pose) or a
+    random pose near its own root; a new node is joined to the other tree's two nearest
+    nodes within ``o.connect_rad`` (:func:`connect`).  The first tree's node ``a``, the
+    second's ``b`` and the pieces from a to b; or None within ``o.nodes`` expansions.
+    With ``at_goal``, a first-tree node at the second tree's root pose ends it too: ``b``
+    is then 0 and no pieces (any grasp at the goal pose will do)."""
+    aims = (trees[1].nodes[0].X_GO, trees[0].nodes[0].X_GO)
     goal_fails: tuple[dict[int, int], dict[int, int]] = ({}, {})
     for it in range(o.nodes):
-        stats.iterations = it + 1
+        stats.iterations += 1
         k = it % 2
         tree, other = trees[k], trees[1 - k]
         to_goal = rng.random() < o.goal_bias
@@ -420,9 +434,8 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
         if j is None:
             continue
         new = tree.nodes[j]
-        stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
-        if k == 0 and _distance(new.X_GO, goal.X_GO, s.rho) < 1e-9:
-            return tree.path(j), trees, stats
+        if at_goal and k == 0 and _distance(new.X_GO, aims[0], s.rho) < 1e-9:
+            return j, 0, []
         d = _distances(np.array([c.X_GO for c in other.nodes]), new.X_GO, s.rho)
         for m in np.argsort(d)[:2]:
             if d[m] > o.connect_rad:
@@ -431,6 +444,5 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
             a, b = (j, int(m)) if k == 0 else (int(m), j)
             link = connect(s, trees[0].nodes[a], trees[1].nodes[b], rng, o, g)
             if link is not None:
-                return trees[0].path(a) + link + reversed_path(trees[1].path(b)), trees, stats
-    stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
-    return None, trees, stats
+                return a, b, link
+    return None

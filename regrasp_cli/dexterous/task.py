@@ -15,7 +15,7 @@ not join within their budget).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from time import perf_counter
 
@@ -25,6 +25,8 @@ from scipy.spatial import ConvexHull
 from regrasp_cli.config import InhandSpec, ObstacleSpec, load_inhand_spec
 from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp
 from regrasp_cli.dexterous.gsn import GsConfig, GsOptions, GsScratch
+from regrasp_cli.dexterous.multiquery import GsRoadmap, LearnOptions, LearnStats, from_arrays, learn, query, \
+    to_arrays
 from regrasp_cli.dexterous.hand import reach, tip_targets
 from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, grow_connect, start_config, tree_budgets
 from regrasp_cli.dexterous.smooth import smooth
@@ -35,13 +37,16 @@ from regrasp_cli.grasp.surface import build_surface
 from regrasp_cli.grasp.workspace import hand_workspace
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.model.collision import CollisionOptions, ObjectPlacement, collision_world
-from regrasp_cli.model.objects import ObjectMesh
+from regrasp_cli.model.objects import ObjectMesh, mesh_sha256
 from regrasp_cli.model.robot import Kinematics, Robot, load_robot
 from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
 from regrasp_cli.scene import scene_object
+from regrasp_cli.store import Provenance, artefact_lock, is_fresh, read_artefact, robot_identity, sha256_params, \
+    write_artefact
 
 CONTACT_TOLERANCE = 0.002  # m: fingertip-object penetration allowed at a contact (as the grasp search)
 GOAL_PROBES = 40  # RLG samples at the goal pose before it is called unreachable
+ROADMAP_FORMAT, ROADMAP_VERSION = "regrasp.inhand-roadmap", 1
 
 
 @dataclass(frozen=True)
@@ -170,6 +175,8 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
         out.failure = PlanningFailed(Stage.GRASPS, f"no force-closure grasp of the object at its start pose in "
                                                    f"{options.start_samples} samples")
         return _finish(out, s, stages, t0)
+    if o.mode == "multi-query":
+        return _plan_multi_query(problem, s, cache_dir, start, goal, rng, options, out, stages, t0)
     t = perf_counter()
     pieces, iterations, kept = None, 0, 0
     for k, budget in enumerate(tree_budgets(options.nodes, options.first_tree)):
@@ -192,6 +199,12 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
         out.failure = PlanningFailed(Stage.ROADMAP, f"{what} in GS_n in {iterations} expansions ({k + 1} "
                                                     f"{'pairs of trees' if options.goal_tree else 'trees'}, {kept} nodes)")
         return _finish(out, s, stages, t0)
+    return _smoothed(problem, s, pieces, rng, out, stages, t0)
+
+
+def _smoothed(problem: InhandProblem, s: GsScratch, pieces: list[Piece], rng: np.random.Generator,
+              out: InhandOutcome, stages: dict, t0: float) -> InhandOutcome:
+    o = problem.spec.planning
     out.stats.update(regrasps_unsmoothed=sum(isinstance(p, Regrasp) for p in pieces),
                      transfers_unsmoothed=sum(not isinstance(p, Regrasp) for p in pieces))
     if o.smooth:
@@ -200,6 +213,78 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
         stages["smoothing"] = perf_counter() - t
     out.pieces = pieces
     return _finish(out, s, stages, t0)
+
+
+def _plan_multi_query(problem: InhandProblem, s: GsScratch, cache_dir: Path | None, start: GsConfig,
+                      goal: GsConfig, rng: np.random.Generator, options: RoadmapOptions, out: InhandOutcome,
+                      stages: dict, t0: float) -> InhandOutcome:
+    """§V's multi-query version: the learned roadmap (built first when missing), the start
+    and goal grasps joined to it, the path over it."""
+    t = perf_counter()
+    rm, _, built = inhand_roadmap(problem, cache_dir)
+    stages["roadmap learning" if built else "roadmap loading"] = perf_counter() - t
+    t = perf_counter()
+    gait = GaitOptions(gait_m=problem.spec.planning.gait_m)
+    pieces, st, why = query(s, rm, start, goal, rng, LearnOptions(), options, gait)
+    stages["roadmap"] = perf_counter() - t
+    out.start = start
+    out.stats.update(nodes_kept=st.kept, iterations=st.iterations, trees=2, start_liftable=st.start_liftable,
+                     roadmap_nodes=len(rm.nodes))
+    if pieces is None:
+        out.failure = PlanningFailed(Stage.ROADMAP, f"multi-query: {why} ({len(rm.nodes)} roadmap nodes)")
+        return _finish(out, s, stages, t0)
+    return _smoothed(problem, s, pieces, rng, out, stages, t0)
+
+
+def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: RoadmapOptions, g: GaitOptions) -> Provenance:
+    """What a learned roadmap depends on: the robot, the object's geometry, the hand's
+    posture, the friction, where the object is held, the obstacles and the options."""
+    spec = problem.spec
+    params = {"hand": problem.hand, "q_fixed": problem.q_fixed.round(9).tolist(), "friction": spec.object.friction,
+              "p_GO": spec.X_GO_start[:3, 3].round(9).tolist(), "obstacles": [repr(x) for x in spec.obstacles],
+              "learn": asdict(o), "roadmap": asdict(r), "gait": asdict(g)}
+    return Provenance(ROADMAP_FORMAT, ROADMAP_VERSION, {"urdf": problem.robot.urdf_sha256,
+                                                        "robot_yaml": problem.robot.robot_yaml_sha256,
+                                                        "mesh": mesh_sha256(problem.object),
+                                                        "params": sha256_params(params)})
+
+
+def roadmap_path(cache_dir: Path, problem: InhandProblem, prov: Provenance) -> Path:
+    return (Path(cache_dir) / "inhand-roadmap" /
+            f"{robot_identity(problem.robot)}-{problem.hand}-{prov.inputs['params'][:12]}.h5")
+
+
+def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions = LearnOptions(),
+                   progress=None) -> tuple[GsRoadmap, LearnStats | None, bool]:
+    """The learned roadmap for the problem's hand, object and placement: read from the
+    cache when fresh, else learned (seeded by the options, not the query) and written;
+    (roadmap, the learning's counts when it ran, whether it was built).  A roadmap of a
+    single node is an error: no grasp at a random orientation joined it."""
+    spec = problem.spec
+    r = replace(RoadmapOptions(), step_rad=spec.planning.step_rad)
+    g = GaitOptions(gait_m=spec.planning.gait_m)
+    prov = roadmap_provenance(problem, o, r, g)
+    path = None if cache_dir is None else roadmap_path(cache_dir, problem, prov)
+    if path is not None:
+        with artefact_lock(path):
+            if path.is_file() and is_fresh(path, prov):
+                return from_arrays(read_artefact(path, prov, "regrasp inhand roadmap").data), None, False
+            rm, st = _learn(problem, cache_dir, o, r, g, progress)
+            write_artefact(path, prov, to_arrays(rm), attrs={"roots": st.roots, "joined": st.joined})
+            return rm, st, True
+    rm, st = _learn(problem, cache_dir, o, r, g, progress)
+    return rm, st, True
+
+
+def _learn(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions, r: RoadmapOptions, g: GaitOptions,
+           progress) -> tuple[GsRoadmap, LearnStats]:
+    rng = np.random.default_rng(o.seed)
+    s = scratch(problem, cache_dir, rng)
+    rm, st = learn(s, problem.spec.X_GO_start[:3, 3], rng, o, r, g, progress)
+    if len(rm.nodes) < 2:
+        raise PlanningFailed(Stage.ROADMAP, f"the roadmap learning joined none of {st.roots} grasps at random "
+                                            f"orientations ({o.roots} tried) to its first node")
+    return rm, st
 
 
 def goal_config(problem: InhandProblem, s: GsScratch, rng: np.random.Generator, o: RoadmapOptions) -> GsConfig:
