@@ -1,21 +1,21 @@
 """The multi-query GS_n roadmap (seed 003 §V): a learning phase builds, once per hand,
 object and placement, "a graph composed of components in GS_n linked by regrasping-
-transfer and transfer-regrasping paths"; each query then links its start and goal grasps
+transfer and transfer-regrasping paths"; each query then joins its start and goal grasps
 to the graph and follows it.
 
-Learning (:func:`learn`): ``trees`` trees are rooted at RLG samples at random
-orientations (the object's centre where the scenes put it) and grown in turn by the
-single-query planner's expansions (:func:`roadmap._extend`, towards random orientations):
-each tree is a connected piece of GS_n, its edges transfers and regrasps (§IV's
-reduction).  After each new node, the nearest nodes of the other components within
-``link_rad`` are tried with :func:`roadmap.connect`, §V's regrasp-transfer link; a link
-merges two components.  Only links between components are tried, which is the paper's
-point: few costly link tests, after GS_n's own connectivity is known.
+Learning (:func:`learn`): the roadmap starts from an RLG sample at a random orientation
+(the object's centre where the scene holds it), and ``roots`` more such grasps are joined
+to it in turn, each by the single-query planner's two-tree growth
+(:func:`roadmap.join_trees`: the roadmap is one tree, the new grasp the other; their
+edges are GS_n paths reduced to transfers and regrasps, their join §V's
+transfer-regrasp link).  The roadmap's growth is kept either way; a grasp that does not
+join is dropped, so the graph is one connected component.
 
-A query (:func:`query`) links the start grasp and a grasp at the goal pose to their
-nearest roadmap nodes the same way and returns the shortest path over the graph (the
-object's turn, summed), every edge run forwards or backwards (transfers and regrasps are
-reversible).  Every edge ends exactly on its node's configuration, so the pieces chain.
+A query (:func:`query`) joins the start grasp and a grasp at the goal pose the same way
+and follows the shortest route (the object's turn), each edge forwards or backwards
+(transfers and regrasps are reversible), cutting detours where a direct link goes.
+Every edge ends exactly on its node's configuration, so the pieces chain.  The graph is
+a tree (each join adds one edge), so routes are long: docs/DESIGN-NOTES.md, session 16.
 
 Frames: the grasp frame G (fixed), the object frame O; metres, radians.
 """
