@@ -31,7 +31,7 @@ from regrasp_cli.dexterous.hand import reach, tip_targets
 from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, grow_connect, start_config, tree_budgets
 from regrasp_cli.dexterous.smooth import smooth
 from regrasp_cli.dexterous.surface import Surface
-from regrasp_cli.errors import InputError
+from regrasp_cli.errors import InputError, StaleArtefactError
 from regrasp_cli.grasp.single import HandModel
 from regrasp_cli.grasp.surface import build_surface
 from regrasp_cli.grasp.workspace import hand_workspace
@@ -41,8 +41,7 @@ from regrasp_cli.model.objects import ObjectMesh, mesh_sha256
 from regrasp_cli.model.robot import Kinematics, Robot, load_robot
 from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
 from regrasp_cli.scene import scene_object
-from regrasp_cli.store import Provenance, artefact_lock, is_fresh, read_artefact, robot_identity, sha256_params, \
-    write_artefact
+from regrasp_cli.store import Provenance, artefact_lock, read_artefact, robot_identity, sha256_params, write_artefact
 
 CONTACT_TOLERANCE = 0.002  # m: fingertip-object penetration allowed at a contact (as the grasp search)
 GOAL_PROBES = 40  # RLG samples at the goal pose before it is called unreachable
@@ -267,8 +266,11 @@ def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptio
     path = None if cache_dir is None else roadmap_path(cache_dir, problem, prov)
     if path is not None:
         with artefact_lock(path):
-            if path.is_file() and is_fresh(path, prov):
-                return from_arrays(read_artefact(path, prov, "regrasp inhand roadmap").data), None, False
+            if path.is_file():
+                try:  # read once: a stale or damaged file is learned again, never used
+                    return from_arrays(read_artefact(path, prov, "regrasp inhand roadmap").data), None, False
+                except StaleArtefactError:
+                    pass
             rm, st = _learn(problem, cache_dir, o, r, g, progress)
             write_artefact(path, prov, to_arrays(rm), attrs={"roots": st.roots, "joined": st.joined})
             return rm, st, True
