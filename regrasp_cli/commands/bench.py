@@ -95,6 +95,12 @@ def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int
         raise InputError(None, "--backend", f"expected loky or dask, found {backend!r}")
     if backend == "loky" and scheduler is not None:
         raise InputError(None, "--scheduler", "only for --backend dask")
+    from regrasp_cli.bench.inhand import INHAND_SUITE_FORMAT, suite_format
+
+    if suite_format(suite_file) == INHAND_SUITE_FORMAT:
+        if backend != "loky":
+            raise InputError(None, "--backend", "an in-hand suite runs on local processes only")
+        return run_inhand_bench(suite_file, cache_dir, out_dir, jobs, seeds, planners, budget_s, iterations, console)
     client = dask_client(scheduler) if backend == "dask" else None
     try:
         return _run_bench(suite_file, cache_dir, out_dir, jobs, seeds, planners, budget_s, console, client,
@@ -169,6 +175,55 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
     print_tables(records, console, REFERENCE, offline)
     console.print(f"results: {out_dir}/ (runs.jsonl, summary.md, times.png, meta.json, ompl/*.log, plans/)")
     return records
+
+
+def run_inhand_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int, seeds: int | None,
+                     planners: str | None, budget_s: float | None, iterations: int | None,
+                     console: Console) -> list[dict]:
+    """An in-hand suite (:mod:`regrasp_cli.bench.inhand`): ``--seeds N`` runs goals 0 ..
+    N-1; results as a pick-and-place suite's (runs.jsonl, summary.md, meta.json, plans/,
+    and the scenes/ the runs planned)."""
+    from dataclasses import replace
+
+    from joblib import Parallel, delayed
+
+    from regrasp_cli.bench import inhand
+    from regrasp_cli.bench.suite import seeds_of
+
+    inhand.check_overrides(planners, budget_s, iterations)
+    suite = inhand.load_inhand_suite(suite_file)
+    if seeds is not None:
+        suite = replace(suite, goals=seeds_of(None, "--seeds", seeds))
+    out_dir = Path("bench-results") / suite.name if out_dir is None else Path(out_dir)
+    check_writable(out_dir, "--output", folder=True)
+    err = Console(stderr=True)
+    for label in suite.skipped:
+        err.print(f"skipped (mesh not found, optional): {label}", markup=False, highlight=False)
+    items = inhand.items_of(suite, out_dir)
+    learned = inhand.prepare(items, cache_dir, suite.mode)
+    meta = {"machine": machine(), "suite": {"file": str(suite.file), "name": suite.name, "mode": suite.mode,
+                                            "goals": list(suite.goals), "nodes": suite.nodes},
+            "jobs": jobs, "runs": len(items), "roadmap_learning_s": learned}
+    err.print(f"{len(items)} in-hand runs ({suite.mode}), {jobs} job(s)")
+    done: list[dict] = []
+    t0 = time.perf_counter()
+    for rec in Parallel(n_jobs=jobs, return_as="generator")(delayed(inhand.run_item)(it, out_dir, cache_dir)
+                                                           for it in items):
+        done.append(rec)
+        state = "solved" if rec["solved"] else f"FAILED at {rec['stage']}: {rec['reason']}"
+        err.print(f"[{len(done)}/{len(items)}] {rec['hand']} {rec['object']} goal {rec['goal']}: "
+                  f"{rec['total_s']:.1f} s, {state}", markup=False, highlight=False)
+        atomic_write_text(out_dir / "runs.jsonl", jsonl(done))
+    meta["wall_s"] = time.perf_counter() - t0
+    atomic_write_text(out_dir / "meta.json", json.dumps(meta, indent=1, default=_plain) + "\n")
+    m = meta["machine"]
+    table = inhand.summary(done)
+    atomic_write_text(out_dir / "summary.md", f"# In-hand benchmark `{suite.name}` ({suite.mode})\n\n{m['date']}; "
+                                              f"{m['cpu']}, {m['cores']} cores; {len(items)} runs, jobs={jobs}; "
+                                              f"a run is solved when its plan passes `regrasp validate`.\n\n{table}")
+    console.print(table)
+    console.print(f"results: {out_dir}/ (runs.jsonl, summary.md, meta.json, plans/, scenes/)")
+    return done
 
 
 def print_tables(records: list[dict], console: Console, reference: str = "roadmap",

@@ -1,0 +1,233 @@
+"""The in-hand benchmark suite (seed 003; ``format: regrasp.inhand-bench/1``), run by
+`regrasp bench` like the pick-and-place suites.
+
+For each hand, each of its objects and each of ``goals`` goal orientations (uniform on
+SO(3), goal k drawn from seed k, about the object's own centre, which starts at the
+hand's grasp frame), the run writes the in-hand scene (``OUT/scenes/``), plans it as
+`regrasp inhand plan` does, writes the plan (``OUT/plans/``) and checks it with
+`regrasp validate`.  A run is solved when the plan is valid.
+
+Fields: ``name``; ``hands`` (each ``{robot, side, label, objects}``: a robot.yaml path
+relative to the suite or ``builtin:NAME``, the hand's side (default right), a label, and
+the labels of the objects it is given, default all); ``objects`` (each ``{mesh, scale,
+friction, label, optional}``, paths relative to the suite file; ``optional: true`` skips a
+missing file, for meshes not shipped); ``goals`` (runs per hand and object, default 20),
+from ``first_goal`` (default 0); ``nodes`` (the trees' budget of expansions, default
+1500); ``mode`` (``single-query`` or ``multi-query``, default single-query: with
+multi-query, each hand and object's roadmap is learned before the runs, and its time
+reported apart).  Every error is an :class:`InputError` naming the file and field.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+from scipy.spatial.transform import Rotation
+
+from regrasp_cli.config import INHAND_MODES, Fields, read_yaml, resolve_path
+from regrasp_cli.errors import InputError, RegraspError
+
+INHAND_SUITE_FORMAT = "regrasp.inhand-bench/1"
+
+
+@dataclass(frozen=True)
+class InhandObject:
+    mesh: str  # builtin:NAME or an absolute path
+    label: str
+    scale: float = 1.0
+    friction: float = 0.8
+
+
+@dataclass(frozen=True)
+class InhandHand:
+    robot: str  # builtin:NAME or an absolute path
+    side: str
+    label: str
+    objects: tuple[str, ...]  # object labels
+
+
+@dataclass(frozen=True)
+class InhandSuite:
+    file: Path
+    name: str
+    hands: tuple[InhandHand, ...]
+    objects: tuple[InhandObject, ...]
+    goals: tuple[int, ...]
+    nodes: int = 1500
+    mode: str = "single-query"
+    skipped: tuple[str, ...] = ()  # optional meshes not found
+
+
+def suite_format(path: str | Path) -> str | None:
+    """The ``format`` field of a suite file, to tell the two kinds apart (None when absent)."""
+    _, data = read_yaml(path)
+    return data.get("format") if isinstance(data, dict) else None
+
+
+def load_inhand_suite(path: str | Path) -> InhandSuite:
+    """Read and check an in-hand suite file."""
+    file, data = read_yaml(path)
+    f = Fields(file, data)
+    f.only("format", "name", "hands", "objects", "goals", "first_goal", "nodes", "mode")
+    if f.str("format") != INHAND_SUITE_FORMAT:
+        raise f.error("format", f"expected {INHAND_SUITE_FORMAT!r}, found {f.data['format']!r}")
+    objects, skipped = _objects(f)
+    labels = {o.label for o in objects} | set(skipped)
+    hands = _hands(f, labels)
+    goals, first = f.int("goals", 20, minimum=1), f.int("first_goal", 0, minimum=0)
+    mode = f.str("mode", "single-query")
+    if mode not in INHAND_MODES:
+        raise f.error("mode", f"expected one of {', '.join(INHAND_MODES)}, found {mode!r}")
+    return InhandSuite(file, f.str("name"), hands, objects, tuple(range(first, first + goals)),
+                       f.int("nodes", 1500, minimum=1), mode, skipped)
+
+
+def _objects(f: Fields) -> tuple[tuple[InhandObject, ...], tuple[str, ...]]:
+    raw = f.raw("objects")
+    if not isinstance(raw, list) or not raw:
+        raise f.error("objects", "expected a non-empty list of {mesh, label, scale, friction, optional}")
+    out, skipped = [], []
+    for i, _ in enumerate(raw):
+        o = Fields(f.file, raw[i], f"objects[{i}]")
+        o.only("mesh", "label", "scale", "friction", "optional")
+        mesh = o.str("mesh")
+        label = o.str("label", Path(mesh).stem.replace("builtin:", ""))
+        if not mesh.startswith("builtin:"):
+            path = resolve_path(f.file, f"objects[{i}].mesh", mesh, must_exist=False)
+            if not path.is_file():
+                if o.bool("optional", False):
+                    skipped.append(label)
+                    continue
+                raise o.error("mesh", f"no such file {path}")
+            mesh = str(path)
+        out.append(InhandObject(mesh, label, o.float("scale", 1.0, positive=True),
+                                o.float("friction", 0.8, positive=True)))
+    if len({o.label for o in out}) != len(out):
+        raise f.error("objects", "two objects have the same label")
+    return tuple(out), tuple(skipped)
+
+
+def _hands(f: Fields, labels: set[str]) -> tuple[InhandHand, ...]:
+    raw = f.raw("hands")
+    if not isinstance(raw, list) or not raw:
+        raise f.error("hands", "expected a non-empty list of {robot, side, label, objects}")
+    out = []
+    for i, _ in enumerate(raw):
+        h = Fields(f.file, raw[i], f"hands[{i}]")
+        h.only("robot", "side", "label", "objects")
+        robot = h.str("robot")
+        if not robot.startswith("builtin:"):
+            robot = str(resolve_path(f.file, f"hands[{i}].robot", robot))  # must exist
+        objects = h.names("objects", tuple(sorted(labels)))
+        unknown = [o for o in objects if o not in labels]
+        if unknown:
+            raise h.error("objects", f"no object labelled {', '.join(unknown)} (objects: {', '.join(sorted(labels))})")
+        out.append(InhandHand(robot, h.str("side", "right"), h.str("label", Path(robot).stem), objects))
+    return tuple(out)
+
+
+def items_of(suite: InhandSuite, out: Path) -> list[dict]:
+    """One run per hand, object and goal; each run's scene written to ``out/scenes/``."""
+    from regrasp_cli.model.objects import load_object_mesh
+
+    items = []
+    (out / "scenes").mkdir(parents=True, exist_ok=True)
+    for h in suite.hands:
+        for o in (o for o in suite.objects if o.label in h.objects):
+            obj = load_object_mesh(o.mesh, base_dir=suite.file.parent, scale=o.scale)
+            centre = obj.mesh.bounds.mean(axis=0)
+            for k in suite.goals:
+                rpy = Rotation.random(random_state=np.random.default_rng(k)).as_euler("xyz")
+                scene = {"format": "regrasp.inhand/1", "robot": h.robot, "hand": h.side,
+                         "object": {"mesh": o.mesh, "scale": o.scale, "friction": o.friction},
+                         "object_start": {"xyz": [float(-x) for x in centre]},
+                         "object_goal": {"rpy": [float(x) for x in rpy]},
+                         "planning": {"seed": k, "nodes": suite.nodes, "mode": suite.mode}}
+                path = out / "scenes" / f"{h.label}-{o.label}-{k:02d}.yaml"
+                path.write_text(yaml.safe_dump(scene, sort_keys=False))
+                items.append({"hand": h.label, "object": o.label, "goal": k, "scene": str(path),
+                              "goal_angle_rad": float(Rotation.from_euler("xyz", rpy).magnitude())})
+    return items
+
+
+def prepare(items: list[dict], cache_dir: Path, mode: str) -> dict[str, float]:
+    """Each hand's artefacts (finger workspaces, self-collision pairs) built once before
+    the workers; with multi-query, each hand and object's roadmap too: its learning time
+    per ``hand/object``."""
+    from regrasp_cli.dexterous.task import inhand_roadmap, load_inhand_problem
+
+    learned = {}
+    for first in {(r["hand"], r["object"] if mode == "multi-query" else ""): r for r in items}.values():
+        problem = load_inhand_problem(first["scene"], cache_dir)
+        if mode == "multi-query":
+            t = time.perf_counter()
+            _, _, built = inhand_roadmap(problem, cache_dir)
+            learned[f"{first['hand']}/{first['object']}"] = time.perf_counter() - t if built else 0.0
+    return learned
+
+
+def run_item(item: dict, out: Path, cache_dir: Path) -> dict:
+    """Plan, write and validate one run: its record (solved, stage, times, counts)."""
+    from regrasp_cli.dexterous.record import make_inhand_plan
+    from regrasp_cli.dexterous.task import load_inhand_problem, plan_inhand
+    from regrasp_cli.trajectory import write_plan
+    from regrasp_cli.validate import validate_plan
+
+    rec = dict(item)
+    t0 = time.perf_counter()
+    try:
+        problem = load_inhand_problem(item["scene"], cache_dir)
+        o = plan_inhand(problem, cache_dir, problem.spec.planning.seed)
+        plan_file = out / "plans" / (Path(item["scene"]).stem + ".json")
+        plan_file.parent.mkdir(parents=True, exist_ok=True)
+        write_plan(plan_file, make_inhand_plan(problem, o, problem.spec.planning.seed, plan_file, cache_dir, True))
+        rec.update({k: v for k, v in o.stats.items() if k != "gs_failures"})
+        if o.failure is not None:
+            rec.update(solved=False, stage=o.failure.stage.value, reason=o.failure.reason)
+        else:
+            t = time.perf_counter()
+            report = validate_plan(plan_file)
+            rec.update(solved=report.valid, validation_s=time.perf_counter() - t,
+                       stage=None if report.valid else "validation",
+                       reason=None if report.valid else str(report.issues[0]))
+    except RegraspError as exc:  # input refused: a failure of the run, with its one line
+        rec.update(solved=False, stage="input", reason=str(exc))
+    except Exception as exc:  # noqa: BLE001 - a crash is a failed run, recorded, not the end of the suite
+        rec.update(solved=False, stage="crash", reason=repr(exc))
+    rec["total_s"] = time.perf_counter() - t0
+    return rec
+
+
+def summary(records: list[dict]) -> str:
+    """The table per hand and object: success, planning time, node counts, gaits."""
+    lines = ["| hand | object | solved (valid) | median planning (s) | IQR (s) | generated (median) | kept (median) | "
+             "gaits (median) | transfers (median) | failures |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for hand, obj in dict.fromkeys((r["hand"], r["object"]) for r in records):
+        rs = [r for r in records if (r["hand"], r["object"]) == (hand, obj)]
+        ok = [r for r in rs if r["solved"]]
+        t = np.array([r["planning_s"] for r in rs if "planning_s" in r] or [np.nan])
+
+        def med(k: str) -> str:
+            return f"{np.median([r[k] for r in ok]):.0f}" if ok else "–"
+
+        fails: dict[str, int] = {}
+        for r in rs:
+            if not r["solved"]:
+                fails[r["stage"]] = fails.get(r["stage"], 0) + 1
+        lines.append(f"| {hand} | {obj} | {len(ok)}/{len(rs)} | {np.median(t):.2f} | "
+                     f"{np.percentile(t, 25):.2f}–{np.percentile(t, 75):.2f} | {med('nodes_generated')} | "
+                     f"{med('nodes_kept')} | {med('regrasps')} | {med('transfers')} | "
+                     f"{', '.join(f'{k} {v}' for k, v in fails.items()) or '–'} |")
+    return "\n".join(lines) + "\n"
+
+
+def check_overrides(planners: str | None, budget_s: float | None, iterations: int | None) -> None:
+    """The pick-and-place suite's options have no meaning here: refused, not ignored."""
+    for name, value in (("--planners", planners), ("--budget-s", budget_s), ("--iterations", iterations)):
+        if value is not None:
+            raise InputError(None, name, f"not for an in-hand suite ({INHAND_SUITE_FORMAT}): its runs have the "
+                                         f"suite's nodes as their budget")
