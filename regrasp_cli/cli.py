@@ -366,6 +366,7 @@ def bench(ctx: click.Context, suite_file: Path, output: Path | None, jobs: int, 
           iterations: int | None) -> None:
     """Run a benchmark suite: every scene x planner x seed, each run in its own process
     with a time budget; write runs.jsonl, summary.md and times.png and print the tables.
+    An in-hand suite (format regrasp.inhand-bench/1) runs every hand x object x goal.
 
     A failed run (no plan, invalid plan, crash, over budget) is recorded with its reason."""
     from regrasp_cli.commands.bench import run_bench

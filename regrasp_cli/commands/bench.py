@@ -2,7 +2,9 @@
 ``runs.jsonl`` (one record per run, rewritten atomically as runs finish), ``summary.md``
 (the tables), ``times.png`` (time per phase per planner), ``meta.json`` (machine,
 suite, offline stages, wall time) and ``ompl/<scene>.log`` (OMPL's benchmark log format,
-see :mod:`regrasp_cli.bench.ompllog`); the tables are also printed."""
+see :mod:`regrasp_cli.bench.ompllog`); the tables are also printed.  An in-hand suite
+(:mod:`regrasp_cli.bench.inhand`) writes runs.jsonl, summary.md, meta.json, plans/ and
+scenes/."""
 
 from __future__ import annotations
 

@@ -8,8 +8,9 @@ Learning (:func:`learn`): the roadmap starts from an RLG sample at a random orie
 to it in turn, each by the single-query planner's two-tree growth
 (:func:`roadmap.join_trees`: the roadmap is one tree, the new grasp the other; their
 edges are GS_n paths reduced to transfers and regrasps, their join §V's
-transfer-regrasp link).  The roadmap's growth is kept either way; a grasp that does not
-join is dropped, so the graph is one connected component.
+transfer-regrasp link), every expansion aimed at the other tree.  The roadmap's growth is
+kept either way; a grasp that does not join is dropped, so the graph is one connected
+component.
 
 A query (:func:`query`) joins the start grasp and a grasp at the goal pose the same way
 and follows the shortest route (the object's turn), each edge forwards or backwards
