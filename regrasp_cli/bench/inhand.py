@@ -154,16 +154,19 @@ def items_of(suite: InhandSuite, out: Path) -> list[dict]:
     return items
 
 
-def prepare(items: list[dict], cache_dir: Path, mode: str) -> dict[str, float]:
+def prepare(items: list[dict], cache_dir: Path, mode: str, notice=None) -> dict[str, float]:
     """Each hand's artefacts (finger workspaces, self-collision pairs) built once before
     the workers; with multi-query, each hand and object's roadmap too: its learning time
-    per ``hand/object``."""
+    per ``hand/object`` (0 when found fresh in the cache).  ``notice(text)`` is told
+    before each roadmap."""
     from regrasp_cli.dexterous.task import inhand_roadmap, load_inhand_problem
 
     learned = {}
     for first in {(r["hand"], r["object"] if mode == "multi-query" else ""): r for r in items}.values():
         problem = load_inhand_problem(first["scene"], cache_dir)
         if mode == "multi-query":
+            if notice is not None:
+                notice(f"the {first['hand']} roadmap for the {first['object']} (learned once, or found in the cache)")
             t = time.perf_counter()
             _, _, built = inhand_roadmap(problem, cache_dir)
             learned[f"{first['hand']}/{first['object']}"] = time.perf_counter() - t if built else 0.0

@@ -202,7 +202,7 @@ def run_inhand_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jo
     for label in suite.skipped:
         err.print(f"skipped (mesh not found, optional): {label}", markup=False, highlight=False)
     items = inhand.items_of(suite, out_dir)
-    learned = inhand.prepare(items, cache_dir, suite.mode)
+    learned = inhand.prepare(items, cache_dir, suite.mode, lambda text: err.print(text, markup=False, highlight=False))
     meta = {"machine": machine(), "suite": {"file": str(suite.file), "name": suite.name, "mode": suite.mode,
                                             "goals": list(suite.goals), "nodes": suite.nodes},
             "jobs": jobs, "runs": len(items), "roadmap_learning_s": learned}
