@@ -216,10 +216,6 @@ def to_arrays(rm: GsRoadmap) -> dict[str, np.ndarray]:
     n_f, nq = nodes[0].p.shape[0], nodes[0].q.shape[0]
     lengths = np.array([len(p.q) for _, p in pieces], int)
     X = [p.X_GO if isinstance(p, Transfer) else np.repeat(p.before.X_GO[None], len(p.q), 0) for _, p in pieces]
-    def contacts(p: Piece, which: str) -> np.ndarray:
-        if isinstance(p, Transfer):
-            return p.p if which == "p" else p.n
-        return np.stack([getattr(p.before, which), getattr(p.after, which)])
     return {
         "nodes/X_GO": np.array([c.X_GO for c in nodes]), "nodes/p": np.array([c.p for c in nodes]),
         "nodes/n": np.array([c.n for c in nodes]), "nodes/q": np.array([c.q for c in nodes]),
@@ -227,11 +223,18 @@ def to_arrays(rm: GsRoadmap) -> dict[str, np.ndarray]:
         "pieces/edge": np.array([e for e, _ in pieces], int),
         "pieces/finger": np.array([p.finger if isinstance(p, Regrasp) else -1 for _, p in pieces], int),
         "pieces/length": lengths,
-        "pieces/p": np.array([np.broadcast_to(contacts(p, "p"), (2, n_f, 3)) for _, p in pieces]).reshape(-1, 2, n_f, 3),
-        "pieces/n": np.array([np.broadcast_to(contacts(p, "n"), (2, n_f, 3)) for _, p in pieces]).reshape(-1, 2, n_f, 3),
+        "pieces/p": np.array([_ends(p, "p") for _, p in pieces]).reshape(-1, 2, n_f, 3),
+        "pieces/n": np.array([_ends(p, "n") for _, p in pieces]).reshape(-1, 2, n_f, 3),
         "waypoints/X_GO": np.concatenate(X) if X else np.zeros((0, 4, 4)),
         "waypoints/q": np.concatenate([p.q for _, p in pieces]) if pieces else np.zeros((0, nq)),
     }
+
+
+def _ends(p: Piece, which: str) -> np.ndarray:
+    """(2, n, 3): a piece's contacts (``which`` "p") or normals ("n") before and after it."""
+    if isinstance(p, Transfer):
+        return np.stack([getattr(p, which)] * 2)
+    return np.stack([getattr(p.before, which), getattr(p.after, which)])
 
 
 def from_arrays(d: dict[str, np.ndarray]) -> GsRoadmap:

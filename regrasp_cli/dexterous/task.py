@@ -239,8 +239,9 @@ def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: RoadmapOption
     """What a learned roadmap depends on: the robot, the object's geometry, the hand's
     posture, the friction, where the object is held, the obstacles and the options."""
     spec = problem.spec
-    params = {"hand": problem.hand, "q_fixed": (problem.q_fixed.round(9) + 0.0).tolist(), "friction": spec.object.friction,
-              "p_GO": (spec.X_GO_start[:3, 3].round(9) + 0.0).tolist(), "obstacles": [repr(x) for x in spec.obstacles],
+    plain = lambda a: (np.round(a, 9) + 0.0).tolist()  # noqa: E731 - -0.0 and 0.0 are one key
+    params = {"hand": problem.hand, "q_fixed": plain(problem.q_fixed), "friction": spec.object.friction,
+              "p_GO": plain(spec.X_GO_start[:3, 3]), "obstacles": [repr(x) for x in spec.obstacles],
               "learn": asdict(o), "roadmap": asdict(r), "gait": asdict(g)}
     return Provenance(ROADMAP_FORMAT, ROADMAP_VERSION, {"urdf": problem.robot.urdf_sha256,
                                                         "robot_yaml": problem.robot.robot_yaml_sha256,

@@ -39,7 +39,8 @@ def test_a_one_goal_suite_plans_validates_and_records(tmp_path, cache_dir):
     assert rec["solved"] and rec["stage"] is None, rec
     plan = out / "plans" / "hand4-ball-00.json"
     assert validate_plan(plan).valid
-    assert (out / "scenes" / "hand4-ball-00.yaml").is_file() and "| hand4 | ball | 1/1 |" in (out / "summary.md").read_text()
+    assert (out / "scenes" / "hand4-ball-00.yaml").is_file()
+    assert "| hand4 | ball | 1/1 |" in (out / "summary.md").read_text()
     assert json.loads((out / "meta.json").read_text())["suite"]["mode"] == "single-query"
 
 
