@@ -250,8 +250,10 @@ def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: RoadmapOption
 
 
 def roadmap_path(cache_dir: Path, problem: InhandProblem, prov: Provenance) -> Path:
+    """One file per robot, hand and inputs (the object's mesh among them: two objects'
+    roadmaps must not take turns overwriting one file)."""
     return (Path(cache_dir) / "inhand-roadmap" /
-            f"{robot_identity(problem.robot)}-{problem.hand}-{prov.inputs['params'][:12]}.h5")
+            f"{robot_identity(problem.robot)}-{problem.hand}-{sha256_params(dict(prov.inputs))[:12]}.h5")
 
 
 def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions = LearnOptions(),

@@ -94,6 +94,17 @@ def test_the_cached_roadmap_is_reused_and_rebuilt_when_its_bytes_change(tmp_path
     assert built  # refused as damaged and learned again, not read
 
 
+def test_two_objects_get_two_roadmap_files(tmp_path, cache_dir):
+    ball = load_inhand_problem(_scene(tmp_path), cache_dir)
+    d = yaml.safe_load((tmp_path / "scene.yaml").read_text())
+    d["object"]["mesh"] = "builtin:cube"
+    (tmp_path / "cube.yaml").write_text(yaml.safe_dump(d))
+    cube = load_inhand_problem(tmp_path / "cube.yaml", cache_dir)
+    o, r, g = LearnOptions(), RoadmapOptions(), GaitOptions()
+    paths = {roadmap_path(tmp_path, p, roadmap_provenance(p, o, r, g)) for p in (ball, cube)}
+    assert len(paths) == 2  # else each would find the other's file stale and learn over it
+
+
 def test_a_bad_mode_is_refused_with_its_field(tmp_path):
     with pytest.raises(InputError) as e:
         load_inhand_spec(_scene(tmp_path, mode="any"))
