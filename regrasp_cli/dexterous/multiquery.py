@@ -170,7 +170,7 @@ def query(s: GsScratch, rm: GsRoadmap, start: GsConfig, goal: GsConfig, rng: np.
     ids = list(range(len(rm.nodes)))
     ends = []
     for name, c in (("start", start), ("goal", goal)):
-        i = _join(s, work, main, ids, c, o.query_expansions, o.aim, rng, r, g, stats)
+        i = _join(s, work, main, ids, c, o.query_expansions, r.goal_bias, rng, r, g, stats)
         if i is None:
             stats.kept = len(work.nodes)
             return None, stats, f"the {name} grasp did not join the roadmap in {o.query_expansions} expansions"
