@@ -279,6 +279,7 @@ class RobotSpec:
     srdf: Path | None = None  # a MoveIt SRDF whose disable_collisions pairs are added
     srdf_disabled: tuple[tuple[str, str], ...] = ()
     convex_hulls: bool = True  # mesh collision geometries replaced by their convex hulls
+    collision_from_visual: tuple[str, ...] = ()  # links whose visual geometry is their collision geometry
 
 
 def _find_package_share(package: str) -> list[Path]:
@@ -313,7 +314,7 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     file, data = read_yaml(path)
     f = Fields(file, data)
     f.only("format", "urdf", "srdf", "groups", "hands", "rest", "disabled_collisions", "self_collision",
-           "convex_hulls")
+           "convex_hulls", "collision_from_visual")
     if f.str("format") != ROBOT_FORMAT:
         raise f.error("format", f"expected '{ROBOT_FORMAT}', found {f.data['format']!r}")
     urdf, package_dirs = resolve_urdf(file, "urdf", f.str("urdf"))
@@ -363,7 +364,11 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     hulls = f.data.get("convex_hulls", True)
     if not isinstance(hulls, bool):
         raise f.error("convex_hulls", f"expected true or false, found {hulls!r}")
-    return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc, srdf, srdf_pairs, hulls)
+    from_visual = f.data.get("collision_from_visual", [])
+    if not (isinstance(from_visual, list) and all(isinstance(s, str) for s in from_visual)):
+        raise f.error("collision_from_visual", f"expected a list of link names, found {from_visual!r}")
+    return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc, srdf, srdf_pairs, hulls,
+                     tuple(from_visual))
 
 
 def _srdf_disabled(srdf: Path, file: Path) -> list[tuple[str, str]]:

@@ -89,6 +89,7 @@ class Robot:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise InputError(spec.file, "urdf", f"cannot parse URDF {spec.urdf}: {first}") from None
         self.model: pin.Model = model
+        _collision_from_visual(spec, model, collision, visual)
         if spec.convex_hulls:
             _convexify(collision)
         self.collision_model: pin.GeometryModel = collision
@@ -285,6 +286,26 @@ def carries(model: pin.Model, j: int, k: int) -> bool:
             return True
         k = model.parents[k]
     return j == 0
+
+
+def _collision_from_visual(spec: RobotSpec, model: pin.Model, collision: pin.GeometryModel,
+                           visual: pin.GeometryModel) -> None:
+    """The collision geometry of robot.yaml's ``collision_from_visual`` links replaced by
+    their visual geometry: many URDFs carry coarse boxes (the Allegro hand's distal boxes
+    reach 11 mm past the link, to the fingertip's centre, and stick out of the tip)."""
+    for link in spec.collision_from_visual:
+        fid = model.getFrameId(link) if model.existFrame(link) else model.nframes
+        if fid == model.nframes or model.frames[fid].type != pin.FrameType.BODY:
+            raise InputError(spec.file, "collision_from_visual", f"expected links of {spec.urdf.name}, found {link!r}")
+        shapes = [go for go in visual.geometryObjects if go.parentFrame == fid]
+        if not shapes:
+            raise InputError(spec.file, "collision_from_visual", f"link {link} has no visual geometry")
+        for name in [go.name for go in collision.geometryObjects if go.parentFrame == fid]:
+            collision.removeGeometryObject(name)
+        for go in shapes:
+            go = go.copy()
+            go.name = f"{go.name}_from_visual"
+            collision.addGeometryObject(go)
 
 
 def _convexify(gm: pin.GeometryModel) -> None:

@@ -286,13 +286,17 @@ def collision_meshes_sha256(robot: Robot) -> str:
 
 def cache_key(robot: Robot) -> dict:
     """What the computed pairs depend on: the URDF, its collision meshes (and whether they
-    are replaced by convex hulls) and the ``self_collision`` options.  Not the rest of robot.yaml (rest pose, hands, groups: the
+    are replaced by convex hulls, the links that take their visual geometry) and the
+    ``self_collision`` options.  Not the rest of robot.yaml (rest pose, hands, groups: the
     samples cover every joint within its URDF limits) nor the user's and SRDF pairs, which
     are added after the cache is read."""
     opts = robot.spec.self_collision
-    return {"urdf": robot.urdf_sha256, "meshes": collision_meshes_sha256(robot), "samples": opts.samples,
-            "seed": opts.seed, "margin": opts.never_margin, "convex_hulls": robot.spec.convex_hulls,
-            "version": CACHE_VERSION}
+    key = {"urdf": robot.urdf_sha256, "meshes": collision_meshes_sha256(robot), "samples": opts.samples,
+           "seed": opts.seed, "margin": opts.never_margin, "convex_hulls": robot.spec.convex_hulls,
+           "version": CACHE_VERSION}
+    if robot.spec.collision_from_visual:  # absent otherwise: the keys of robots without it unchanged
+        key["from_visual"] = list(robot.spec.collision_from_visual)
+    return key
 
 
 def disabled_pairs(robot: Robot, cache_dir: Path | None, progress: PairProgress | None = None) -> DisabledPairs:
