@@ -613,7 +613,7 @@ class InhandPlanning:
     :mod:`regrasp_cli.dexterous.multiquery`, built and cached when missing)."""
 
     seed: int = 0
-    nodes: int = 1500
+    nodes: int = 3000
     step_rad: float = 0.35
     gait_m: float = 0.012
     smooth: bool = True

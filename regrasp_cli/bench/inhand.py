@@ -13,7 +13,7 @@ the labels of the objects it is given, default all); ``objects`` (each ``{mesh, 
 friction, label, optional}``, paths relative to the suite file; ``optional: true`` skips a
 missing file, for meshes not shipped); ``goals`` (runs per hand and object, default 20),
 from ``first_goal`` (default 0); ``nodes`` (the trees' budget of expansions, default
-1500); ``mode`` (``single-query`` or ``multi-query``, default single-query: with
+that of a scene, ``InhandPlanning.nodes``); ``mode`` (``single-query`` or ``multi-query``, default single-query: with
 multi-query, each hand and object's roadmap is learned before the runs, and its time
 reported apart).  Every error is an :class:`InputError` naming the file and field.
 """
@@ -28,7 +28,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from regrasp_cli.config import INHAND_MODES, Fields, read_yaml, resolve_path
+from regrasp_cli.config import INHAND_MODES, Fields, InhandPlanning, read_yaml, resolve_path
 from regrasp_cli.errors import InputError, RegraspError
 
 INHAND_SUITE_FORMAT = "regrasp.inhand-bench/1"
@@ -57,7 +57,7 @@ class InhandSuite:
     hands: tuple[InhandHand, ...]
     objects: tuple[InhandObject, ...]
     goals: tuple[int, ...]
-    nodes: int = 1500
+    nodes: int = InhandPlanning.nodes
     mode: str = "single-query"
     skipped: tuple[str, ...] = ()  # optional meshes not found
 
@@ -83,7 +83,7 @@ def load_inhand_suite(path: str | Path) -> InhandSuite:
     if mode not in INHAND_MODES:
         raise f.error("mode", f"expected one of {', '.join(INHAND_MODES)}, found {mode!r}")
     return InhandSuite(file, f.str("name"), hands, objects, tuple(range(first, first + goals)),
-                       f.int("nodes", 1500, minimum=1), mode, skipped)
+                       f.int("nodes", InhandPlanning.nodes, minimum=1), mode, skipped)
 
 
 def _objects(f: Fields) -> tuple[tuple[InhandObject, ...], tuple[str, ...]]:

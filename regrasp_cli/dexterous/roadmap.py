@@ -50,7 +50,7 @@ class RoadmapOptions:
     step_rad: float = 0.35  # object rotation per edge
     step_m: float = 0.01  # object translation per edge
     goal_bias: float = 0.5  # probability that the goal pose is the target
-    nodes: int = 1500  # budget of extensions tried
+    nodes: int = 3000  # budget of extensions tried
     start_samples: int = 60  # RLG samples at the start pose
     candidates: int = 40  # contact candidates per finger per sample
     box_m: float = 0.02  # random targets within this of the start position (each axis)
