@@ -364,11 +364,8 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     hulls = f.data.get("convex_hulls", True)
     if not isinstance(hulls, bool):
         raise f.error("convex_hulls", f"expected true or false, found {hulls!r}")
-    from_visual = f.data.get("collision_from_visual", [])
-    if not (isinstance(from_visual, list) and all(isinstance(s, str) for s in from_visual)):
-        raise f.error("collision_from_visual", f"expected a list of link names, found {from_visual!r}")
     return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc, srdf, srdf_pairs, hulls,
-                     tuple(from_visual))
+                     f.names("collision_from_visual", ()))
 
 
 def _srdf_disabled(srdf: Path, file: Path) -> list[tuple[str, str]]:

@@ -12,10 +12,10 @@ relative to the suite or ``builtin:NAME``, the hand's side (default right), a la
 the labels of the objects it is given, default all); ``objects`` (each ``{mesh, scale,
 friction, label, optional}``, paths relative to the suite file; ``optional: true`` skips a
 missing file, for meshes not shipped); ``goals`` (runs per hand and object, default 20),
-from ``first_goal`` (default 0); ``nodes`` (the trees' budget of expansions, default
-that of a scene, ``InhandPlanning.nodes``); ``mode`` (``single-query`` or ``multi-query``, default single-query: with
-multi-query, each hand and object's roadmap is learned before the runs, and its time
-reported apart).  Every error is an :class:`InputError` naming the file and field.
+from ``first_goal`` (default 0); ``nodes`` (the trees' budget of expansions, default a
+scene's, ``InhandPlanning.nodes``); ``mode`` (``single-query`` or ``multi-query``, default
+single-query: with multi-query, each hand and object's roadmap is learned before the
+runs, and its time reported apart).  Every error is an :class:`InputError` naming the file and field.
 """
 
 from __future__ import annotations

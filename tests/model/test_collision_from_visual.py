@@ -68,7 +68,7 @@ def test_the_self_collision_key_follows_the_links(tmp_path):
     (["l3"], "expected links of finger.urdf, found 'l3'"),
     (["j2"], "expected links of finger.urdf, found 'j2'"),
     (["base"], "link base has no visual geometry"),
-    ("l2", "expected a list of link names"),
+    ("l2", "expected a list of names"),
 ])
 def test_bad_links_are_refused_with_the_field(tmp_path, value, expected):
     with pytest.raises(InputError) as e:
