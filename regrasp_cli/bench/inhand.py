@@ -15,7 +15,8 @@ missing file, for meshes not shipped); ``goals`` (runs per hand and object, defa
 from ``first_goal`` (default 0); ``nodes`` (the trees' budget of expansions, default a
 scene's, ``InhandPlanning.nodes``); ``mode`` (``single-query`` or ``multi-query``, default
 single-query: with multi-query, each hand and object's roadmap is learned before the
-runs, and its time reported apart).  Every error is an :class:`InputError` naming the file and field.
+runs, and its time reported apart).  Every error is an :class:`InputError` naming the
+file and field.
 """
 
 from __future__ import annotations

@@ -12,8 +12,9 @@ transfer-regrasp link), every expansion aimed at the other tree.  The roadmap's 
 kept either way; a grasp that does not join is dropped, so the graph is one connected
 component.
 
-A query (:func:`query`) joins the start grasp and a grasp at the goal pose the same way
-and follows the shortest route (the object's turn), each edge forwards or backwards
+A query (:func:`query`) joins the start grasp and a grasp at the goal pose the same way,
+but exploring as the single-query trees do (``RoadmapOptions.goal_bias`` of the
+expansions aimed, the rest towards random poses: aimed joins failed on the cube), and follows the shortest route (the object's turn), each edge forwards or backwards
 (transfers and regrasps are reversible), cutting detours where a direct link goes.
 Every edge ends exactly on its node's configuration, so the pieces chain.  The graph is
 a tree (each join adds one edge), so routes are long: docs/DESIGN-NOTES.md, session 16.
@@ -41,7 +42,7 @@ class LearnOptions:
     round_expansions: int = 150  # expansions a join may take before its grasp is dropped
     query_expansions: int = 300  # the same, for a query's start or goal grasp
     root_tries: int = 20  # RLG samples tried for each grasp
-    aim: float = 1.0  # probability that a join's expansion aims at the other tree, not at a random pose
+    aim: float = 1.0  # probability that a learning join's expansion aims at the other tree, not at a random pose
     # (the single-query planner's 0.5 explores; here the wandering became the routes' detours: 0.5 gave
     # hand4 ball routes of 272 phases, 0.9 166 and 1.0 155, docs/BENCHMARKS.md)
     shortcuts: int = 40  # links a query tries to cut the route's detours (:func:`_shortcut`)
@@ -158,7 +159,8 @@ def query(s: GsScratch, rm: GsRoadmap, start: GsConfig, goal: GsConfig, rng: np.
           o: LearnOptions = LearnOptions(), r: RoadmapOptions = RoadmapOptions(),
           g: GaitOptions = GaitOptions()) -> tuple[list[Piece] | None, RoadmapStats, str]:
     """The pieces from ``start`` to ``goal`` over the roadmap (left as it is), or None and
-    why not: each is joined to it as :func:`learn` joins a grasp, then the shortest path
+    why not: each is joined to it as :func:`learn` joins a grasp (exploring: the aim is
+    ``r.goal_bias``, not ``o.aim``), then the shortest path
     (the object's turn) is followed, each edge forwards or backwards."""
     stats = RoadmapStats(start_liftable=len(s.liftable(start)))
     if not rm.nodes:

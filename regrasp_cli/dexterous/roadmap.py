@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from regrasp_cli.config import InhandPlanning
 from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp, carry, finger_step, reduce_path, regrasp_to, \
     reversed_path
 from regrasp_cli.dexterous.gsn import GsConfig, GsScratch, gs_path
@@ -50,7 +51,7 @@ class RoadmapOptions:
     step_rad: float = 0.35  # object rotation per edge
     step_m: float = 0.01  # object translation per edge
     goal_bias: float = 0.5  # probability that the goal pose is the target
-    nodes: int = 3000  # budget of extensions tried
+    nodes: int = InhandPlanning.nodes  # budget of extensions tried
     start_samples: int = 60  # RLG samples at the start pose
     candidates: int = 40  # contact candidates per finger per sample
     box_m: float = 0.02  # random targets within this of the start position (each axis)

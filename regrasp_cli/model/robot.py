@@ -294,9 +294,9 @@ def _collision_from_visual(spec: RobotSpec, model: pin.Model, collision: pin.Geo
     their visual geometry: many URDFs carry coarse boxes (the Allegro hand's distal boxes
     reach 11 mm past the link, to the fingertip's centre, and stick out of the tip)."""
     for link in spec.collision_from_visual:
-        fid = model.getFrameId(link) if model.existFrame(link) else model.nframes
-        if fid == model.nframes or model.frames[fid].type != pin.FrameType.BODY:
+        if not model.existFrame(link) or model.frames[model.getFrameId(link)].type != pin.FrameType.BODY:
             raise InputError(spec.file, "collision_from_visual", f"expected links of {spec.urdf.name}, found {link!r}")
+        fid = model.getFrameId(link)
         shapes = [go for go in visual.geometryObjects if go.parentFrame == fid]
         if not shapes:
             raise InputError(spec.file, "collision_from_visual", f"link {link} has no visual geometry")
