@@ -91,11 +91,10 @@ def reversed_path(pieces: list[Piece]) -> list[Piece]:
     return [reversed_piece(p) for p in reversed(pieces)]
 
 
-def _segment_free(s: GsScratch, q_a: np.ndarray, q_b: np.ndarray, finger: int, others: set[int],
-                  check_rad: float) -> bool:
+def _segment_free(s: GsScratch, q_a: np.ndarray, q_b: np.ndarray, finger: int, check_rad: float) -> bool:
     k = max(1, int(np.ceil(np.abs(q_b - q_a).max() / check_rad)))
     for t in np.linspace(0.0, 1.0, k + 1)[1:]:
-        if s.finger_collides(q_a + t * (q_b - q_a), finger, others):
+        if s.finger_collides(q_a + t * (q_b - q_a), finger):
             return False
     return True
 
@@ -120,7 +119,7 @@ def _lifted(s: GsScratch, q: np.ndarray, f: int, X_WO: np.ndarray, p_O: np.ndarr
     targets = np.zeros((len(s.hand.fingers), 3))
     for d in (n_W, n_W + back, n_W + 2 * back):
         targets[f] = centre + h * d / np.linalg.norm(d)
-        up = reach(s.hand, q, targets, rng, fingers=(f,), restarts=0, tol=0.1 * h)  # loosely: any clear point
+        up = reach(s.hand, q, targets, rng, fingers=(f,), restarts=0, tol=0.1 * h, kin=s.kin)  # loosely: any clear point
         if up is not None and (s.kin.fk(up, tip)[:3, 3] - p_W) @ n_W - r >= 0.9 * h:
             return up
     return None
@@ -134,12 +133,11 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     new grasp be force closure, the finger reach it and move there without collision.
     ``q_hint``: joint values near the new contact's (an IK seed); ``q_down``: finger
     ``f``'s joints there, known (checked, not solved for)."""
-    if not s.holds(c.p, c.n, f):  # then the new grasp holds too: it has one contact more
+    if f not in s.liftable(c):  # then the new grasp holds too: it has one contact more
         return None
     p, n = c.p.copy(), c.n.copy()
     p[f], n[f] = p_new, n_new
     X_WO = s.X_WG @ c.X_GO
-    others = set(range(len(p))) - {f}
     s.place(c.X_GO)
     seed = c.q.copy()  # the other fingers stay; finger f from the hint
     if q_hint is not None:
@@ -147,7 +145,7 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
         seed[idx] = q_hint[idx]
     targets = tip_targets(X_WO, p, n, s.hand.radii)
     if q_down is None:
-        down = reach(s.hand, seed, targets, rng, fingers=(f,), restarts=1, tol=s.options.tol)
+        down = reach(s.hand, seed, targets, rng, fingers=(f,), restarts=1, tol=s.options.tol, kin=s.kin)
     else:
         down = c.q.copy()
         down[s.hm.hand.finger_idx[f]] = q_down[s.hm.hand.finger_idx[f]]
@@ -164,8 +162,8 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
         segments = list(zip(qs, qs[1:]))
         # coarse first (most tries fail), then as finely as the validator: a distal link
         # can graze a face between coarse checks
-        if all(_segment_free(s, a, b, f, others, o.check_rad) for a, b in segments) and \
-                all(_segment_free(s, a, b, f, others, o.confirm_rad) for a, b in segments):
+        if all(_segment_free(s, a, b, f, o.check_rad) for a, b in segments) and \
+                all(_segment_free(s, a, b, f, o.confirm_rad) for a, b in segments):
             # the quick gate above lets through grasps at the very boundary of closure,
             # which the validator (epsilon over its margin) refuses: the step kept is exact
             return Regrasp(f, np.array(qs), c, GsConfig(c.X_GO, p, n, down)) if s.closure(c.p, c.n, f) > 0 else None
@@ -175,7 +173,7 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
 def _transfer_step(s: GsScratch, state: GsConfig, X_GO: np.ndarray, rng: np.random.Generator,
                    o: GaitOptions) -> GsConfig | None:
     q = reach(s.hand, state.q, tip_targets(s.X_WG @ X_GO, state.p, state.n, s.hand.radii), rng, restarts=0,
-              tol=s.options.tol)
+              tol=s.options.tol, kin=s.kin)
     why = ("transfer ik" if q is None else "transfer joint step" if np.abs(q - state.q).max() > o.max_joint_step
            else "transfer collision" if s.collides(X_GO, q) else None)
     if why is not None:

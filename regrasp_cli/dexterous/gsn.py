@@ -85,6 +85,14 @@ class GsScratch:
         self.generated = 0  # configurations generated (samples and edge ends)
         self.failures: dict[str, int] = {}  # why GS_n paths failed, per check
         self._liftable: dict[bytes, tuple[int, ...]] = {}
+        # collision pairs of each finger (and of all, None): with the object (the eroded
+        # fingertips' model), with the palm and the other fingers (the exact one's)
+        pairs = hm.pair_fingers
+        fingers = range(len(hm.hand.finger_idx))
+        objects = [k for k, (_, fb) in enumerate(pairs) if fb is None]
+        self._object_pairs = {None: objects} | {f: [k for k in objects if pairs[k][0] == f] for f in fingers}
+        hand = [k for k, (_, fb) in enumerate(pairs) if fb is not None]
+        self._hand_pairs = {None: hand} | {f: [k for k in hand if f in pairs[k]] for f in fingers}
 
     def closure(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> float:
         if without is not None:
@@ -132,16 +140,17 @@ class GsScratch:
         hm = self.hm
         return HandModel(hm.robot, hm.hand.side, self.surface.mesh, set(hm.disabled_links), 0.0)
 
-    def _fingers_touch(self, q: np.ndarray, finger: int | None) -> bool:
-        """Do two fingers (or ``finger`` and another, or the palm) overlap at ``q``?"""
-        ex = self._exact
-        pin.updateGeometryPlacements(ex.robot.model, ex.data, ex.gm, ex.gd, ex.robot.to_pin(q))
-        for k, (fa, fb) in enumerate(ex.pair_fingers):
-            if fb is None or (finger is not None and finger not in (fa, fb)):
-                continue  # the object's pairs: the eroded model's business
-            if pin.computeCollision(ex.gm, ex.gd, k):
-                return True
-        return False
+    def _touches(self, q: np.ndarray, finger: int | None) -> bool:
+        """Does ``finger`` (or any finger, or the palm, when None) go into the object
+        beyond the contact tolerance, or overlap another finger or the palm, at ``q``?
+        The fingers' own pairs are checked with exact fingertips only: the eroded ones
+        overlap only where these do."""
+        hm, ex = self.hm, self._exact
+        pin.updateGeometryPlacements(hm.robot.model, hm.data, hm.gm, hm.gd, hm.robot.to_pin(q))
+        if any(pin.computeCollision(hm.gm, hm.gd, k) for k in self._object_pairs[finger]):
+            return True
+        pin.updateGeometryPlacements(ex.robot.model, hm.data, ex.gm, ex.gd)  # the joints just placed
+        return any(pin.computeCollision(ex.gm, ex.gd, k) for k in self._hand_pairs[finger])
 
     def place(self, X_GO: np.ndarray) -> None:
         """Put the object at ``X_GO`` (4, 4) for the collision checks that follow."""
@@ -160,14 +169,13 @@ class GsScratch:
         the object against an obstacle."""
         self.checks += 1
         self.place(X_GO)
-        return (self.hm.collides(q, set(range(len(self.hand.fingers))), None) or self._fingers_touch(q, None)
-                or self._hits_obstacle(q))
+        return self._touches(q, None) or self._hits_obstacle(q)
 
-    def finger_collides(self, q: np.ndarray, finger: int, others: set[int]) -> bool:
+    def finger_collides(self, q: np.ndarray, finger: int) -> bool:
         """Finger ``finger`` (moving, the object where :meth:`place` put it) against the
-        object, the palm, the fingers ``others`` and the obstacles."""
+        object, the palm, the other fingers and the obstacles."""
         self.checks += 1
-        return self.hm.collides(q, others, finger) or self._fingers_touch(q, finger) or self._hits_obstacle(q)
+        return self._touches(q, finger) or self._hits_obstacle(q)
 
 
 def sample_config(s: GsScratch, X_GO: np.ndarray) -> GsConfig | None:
@@ -211,7 +219,7 @@ def gs_path(s: GsScratch, a: GsConfig, b_pose: np.ndarray, b_p: np.ndarray, rng:
             tri, _ = s.surface.locate(pts)
             p[moving], n[moving] = pts, s.surface.normals[tri]
         X_GO = poses[i]
-        q = reach(s.hand, last.q, tip_targets(s.X_WG @ X_GO, p, n, radii), rng, restarts=0, tol=o.tol)
+        q = reach(s.hand, last.q, tip_targets(s.X_WG @ X_GO, p, n, radii), rng, restarts=0, tol=o.tol, kin=s.kin)
         why = ("ik" if q is None else "joint step" if np.abs(q - last.q).max() > o.max_joint_step
                else "collision" if s.collides(X_GO, q) else None)
         if why is None:  # closure without a finger implies it with all (more contacts)

@@ -61,13 +61,16 @@ def tip_targets(X_WO: np.ndarray, p_O: np.ndarray, n_O: np.ndarray, radii: np.nd
 
 
 def reach(h: InHand, q_seed: np.ndarray, targets: np.ndarray, rng: np.random.Generator,
-          fingers: tuple[int, ...] | None = None, restarts: int = 3, tol: float = 1e-4) -> np.ndarray | None:
+          fingers: tuple[int, ...] | None = None, restarts: int = 3, tol: float = 1e-4,
+          kin: Kinematics | None = None) -> np.ndarray | None:
     """Joint values putting each finger of ``fingers`` (positions in ``h.fingers``; default
-    all) at its target (n, 3), the other joints as in ``q_seed``; None when one cannot."""
+    all) at its target (n, 3), the other joints as in ``q_seed``; None when one cannot.
+    ``kin``: scratch the IK overwrites (a fresh one per finger when None)."""
     q = q_seed.copy()
     options = IKOptions(restarts=restarts, tol_position=tol, patience=IK_PATIENCE)
+    data = None if kin is None else kin.data
     for k in range(len(h.fingers)) if fingers is None else fingers:
-        r = finger_ik(h.robot, h.hand, h.fingers[k], targets[k], q, rng, options)
+        r = finger_ik(h.robot, h.hand, h.fingers[k], targets[k], q, rng, options, data)
         if not r.success:
             return None
         q = r.q

@@ -142,7 +142,6 @@ def rlg_sample(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, candida
     n_f = len(s.hand.fingers)
     q = s.hm.q.copy()
     points, normals = np.zeros((n_f, 3)), np.zeros((n_f, 3))
-    placed: set[int] = set()
     for f in map(int, rng.permutation(n_f)):
         idx, near = _candidates(s, X_GO, f)
         for k in rng.permutation(idx.size)[:candidates]:
@@ -150,10 +149,10 @@ def rlg_sample(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, candida
             p, n = s.sampled.points[i:i + 1], s.sampled.normals[i:i + 1]
             targets = np.zeros((n_f, 3))
             targets[f] = tip_targets(s.X_WG @ X_GO, p, n, s.hand.radii[f:f + 1])[0]
-            q_try = reach(s.hand, _seed(s, q, f, near[k]), targets, rng, fingers=(f,), restarts=0, tol=s.options.tol)
-            if q_try is not None and not s.finger_collides(q_try, f, placed):
+            q_try = reach(s.hand, _seed(s, q, f, near[k]), targets, rng, fingers=(f,), restarts=0, tol=s.options.tol,
+                          kin=s.kin)
+            if q_try is not None and not s.finger_collides(q_try, f):
                 q, points[f], normals[f] = q_try, p[0], n[0]
-                placed.add(f)
                 break
         else:
             return None

@@ -141,7 +141,7 @@ def given_start(problem: InhandProblem, s: GsScratch, rng: np.random.Generator) 
     tri, uv = s.surface.locate(np.array([given[n] for n in names], float))
     p, n = s.surface.points(tri, uv), s.surface.normals[tri]
     X_WO = s.X_WG @ spec.X_GO_start
-    q = reach(s.hand, s.hm.q, tip_targets(X_WO, p, n, s.hand.radii), rng, restarts=10, tol=s.options.tol)
+    q = reach(s.hand, s.hm.q, tip_targets(X_WO, p, n, s.hand.radii), rng, restarts=10, tol=s.options.tol, kin=s.kin)
     if q is None:
         raise InputError(spec.file, "start_grasp", "the fingertips cannot reach these contacts with the object at "
                                                    "object_start")
