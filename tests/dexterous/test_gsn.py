@@ -124,3 +124,22 @@ def test_with_fingers_round_the_sphere_every_finger_may_let_go(cache_dir):
     kin = Kinematics(robot)
     for c in all_four[:5]:
         _check(s, mesh, kin, c)
+
+
+def test_fingertips_on_their_contacts_are_free_and_pressed_into_the_object_collide(gs):
+    """The contact tolerance (2 mm) lets a fingertip touch its contact, and a hand found
+    free is free finger by finger; pushed 4 mm into the object a fingertip collides, for
+    that finger's check and for the whole hand's.  (The grasp search's samples may have
+    two fingers side by side touching: the roadmap's own sampling checks that.)"""
+    s, mesh, configs = gs
+    finger = 1
+    free = [c for c in configs if not s.collides(c.X_GO, c.q)]
+    assert len(free) >= 5
+    for c in free[:8]:
+        s.place(c.X_GO)
+        for f in range(len(c.p)):
+            assert not s.finger_collides(c.q, f)
+        X = c.X_GO.copy()
+        X[:3, 3] += 0.004 * (c.X_GO[:3, :3] @ c.n[finger])  # the surface 4 mm past the fingertip
+        assert s.collides(X, c.q)
+        assert s.finger_collides(c.q, finger)  # the object is where collides put it

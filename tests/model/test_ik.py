@@ -117,3 +117,18 @@ def test_unreachable_finger_target(robot):
     assert not res.success
     assert res.position_error > 2.5
     assert robot.within_limits(res.q)
+
+
+def test_finger_ik_on_a_reused_scratch_gives_what_a_fresh_one_gives(robot):
+    """IK overwrites the pinocchio Data it is given: one left from other configurations
+    and frames changes nothing, to the bit."""
+    h = robot.hands["right"]
+    kin, rng = Kinematics(robot), np.random.default_rng(5)
+    for finger in range(len(h.finger_idx)):
+        q = robot.sample(rng, h.finger_idx[finger])
+        p = kin.fk(q, h.tip_frames[finger])[:3, 3] + rng.normal(0.0, 0.01, 3)  # some out of reach
+        kin.fk(robot.sample(rng, h.arm_idx), h.grasp_frame)  # the scratch left elsewhere
+        a = finger_ik(robot, "right", finger, p, robot.q_rest, np.random.default_rng(finger))
+        b = finger_ik(robot, "right", finger, p, robot.q_rest, np.random.default_rng(finger), data=kin.data)
+        np.testing.assert_array_equal(a.q, b.q)
+        assert (a.success, a.iterations, a.position_error) == (b.success, b.iterations, b.position_error)
