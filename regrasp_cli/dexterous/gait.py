@@ -119,7 +119,8 @@ def _lifted(s: GsScratch, q: np.ndarray, f: int, X_WO: np.ndarray, p_O: np.ndarr
     targets = np.zeros((len(s.hand.fingers), 3))
     for d in (n_W, n_W + back, n_W + 2 * back):
         targets[f] = centre + h * d / np.linalg.norm(d)
-        up = reach(s.hand, q, targets, rng, fingers=(f,), restarts=0, tol=0.1 * h, kin=s.kin)  # loosely: any clear point
+        # loosely: any clear point
+        up = reach(s.hand, q, targets, rng, fingers=(f,), restarts=0, tol=0.1 * h, kin=s.kin)
         if up is not None and (s.kin.fk(up, tip)[:3, 3] - p_W) @ n_W - r >= 0.9 * h:
             return up
     return None

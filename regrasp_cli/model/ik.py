@@ -116,7 +116,8 @@ def solve_poses(robot: Robot, frames: tuple[int, ...], X_WTs: tuple[np.ndarray, 
 
 
 def solve_position(robot: Robot, frame: int, p_WT: np.ndarray, q_seed: np.ndarray, idx: np.ndarray,
-                   rng: np.random.Generator, options: IKOptions = IKOptions(), data: pin.Data | None = None) -> IKResult:
+                   rng: np.random.Generator, options: IKOptions = IKOptions(),
+                   data: pin.Data | None = None) -> IKResult:
     """Move the joints ``idx`` so that the origin of ``frame`` reaches the point ``p_WT`` (3,)."""
 
     def residual(k: int, X):
