@@ -20,7 +20,7 @@ import itertools
 
 import numpy as np
 
-from regrasp_cli.grasp.quality import force_closure, origin_inside, primitive_wrenches
+from regrasp_cli.grasp.quality import force_closure, is_force_closure, origin_inside, primitive_wrenches
 
 
 def closure(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: float) -> float:
@@ -30,6 +30,11 @@ def closure(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: fl
     if len(p) < 2:
         return 0.0
     return force_closure(primitive_wrenches(p, n, mu, centre, rho))[1]
+
+
+def closed(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: float) -> bool:
+    """:func:`closure` > 0, mostly without the hull (:func:`grasp.quality.is_force_closure`)."""
+    return len(p) >= 2 and is_force_closure(primitive_wrenches(p, n, mu, centre, rho))
 
 
 def holds(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: float) -> bool:

@@ -155,7 +155,10 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     if down is None:
         return None
     for h in o.lifts_m:
-        up_a = _lifted(s, c.q, f, X_WO, c.p[f], c.n[f], h, rng)
+        key = (c.q.tobytes(), c.X_GO.tobytes(), c.p[f].tobytes(), c.n[f].tobytes(), f, h)
+        if key not in s.lifts:  # a node's finger is lifted at each step it tries
+            s.lifts[key] = _lifted(s, c.q, f, X_WO, c.p[f], c.n[f], h, rng)
+        up_a = s.lifts[key]
         up_b = _lifted(s, down, f, X_WO, p[f], n[f], h, rng)
         if up_a is None or up_b is None:
             continue
@@ -167,7 +170,7 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
                 all(_segment_free(s, a, b, f, o.confirm_rad) for a, b in segments):
             # the quick gate above lets through grasps at the very boundary of closure,
             # which the validator (epsilon over its margin) refuses: the step kept is exact
-            return Regrasp(f, np.array(qs), c, GsConfig(c.X_GO, p, n, down)) if s.closure(c.p, c.n, f) > 0 else None
+            return Regrasp(f, np.array(qs), c, GsConfig(c.X_GO, p, n, down)) if s.closed(c.p, c.n, f) else None
     return None
 
 

@@ -35,7 +35,7 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
-from regrasp_cli.dexterous.contacts import closure, holds
+from regrasp_cli.dexterous.contacts import closed, closure, holds
 from regrasp_cli.dexterous.hand import InHand, reach, tip_targets
 from regrasp_cli.dexterous.surface import Surface, along, geodesic
 from regrasp_cli.dexterous.transfer import interpolate, poses_between
@@ -85,6 +85,8 @@ class GsScratch:
         self.generated = 0  # configurations generated (samples and edge ends)
         self.failures: dict[str, int] = {}  # why GS_n paths failed, per check
         self._liftable: dict[bytes, tuple[int, ...]] = {}
+        self._closed: dict[tuple, bool] = {}
+        self.lifts: dict[tuple, np.ndarray | None] = {}  # gait._lifted's, per finger, configuration and height
         # collision pairs of each finger (and of all, None): with the object (the eroded
         # fingertips' model), with the palm and the other fingers (the exact one's)
         pairs = hm.pair_fingers
@@ -98,6 +100,16 @@ class GsScratch:
         if without is not None:
             p, n = np.delete(p, without, axis=0), np.delete(n, without, axis=0)
         return closure(p, n, self.options.friction, self.centre, self.rho)
+
+    def closed(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> bool:
+        """Force closure with the validator's margin (:meth:`closure` > 0) of the contacts
+        but finger ``without``'s; memoised: a node's finger is asked at each step it tries."""
+        key = (p.tobytes(), n.tobytes(), without)
+        if key not in self._closed:
+            if without is not None:
+                p, n = np.delete(p, without, axis=0), np.delete(n, without, axis=0)
+            self._closed[key] = closed(p, n, self.options.friction, self.centre, self.rho)
+        return self._closed[key]
 
     def holds(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> bool:
         """Do the contacts (but finger ``without``'s) hold the object (force closure)?"""

@@ -252,6 +252,6 @@ def test_a_step_whose_other_fingers_hold_only_at_the_boundary_is_refused(gs, mon
                   if 0.004 < np.linalg.norm(s.sampled.points[k] - start.p[f]) < 0.012
                   and finger_step(s, start, f, s.sampled.points[k], s.sampled.normals[k],
                                   np.random.default_rng(1)) is not None)
-    monkeypatch.setattr(s, "closure", lambda p, n, without=None: 0.0)
+    monkeypatch.setattr(s, "closed", lambda p, n, without=None: False)
     assert finger_step(s, start, f, s.sampled.points[target], s.sampled.normals[target],
                        np.random.default_rng(1)) is None

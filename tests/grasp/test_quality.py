@@ -14,12 +14,14 @@ from regrasp_cli.grasp.quality import (
     GraspScores,
     QualityWeights,
     combine_scores,
+    contains_ball,
     default_torque_scale,
     default_torsion_mu,
     force_closure,
     force_ellipsoid_axis,
     friction_cone_edges,
     grasp_quality,
+    is_force_closure,
     normalise_curvatures,
     primitive_wrenches,
     quality_terms,
@@ -178,6 +180,47 @@ def test_force_closure_degenerate_inputs():
     assert fc and eps == pytest.approx(1 / math.sqrt(6))
     with pytest.raises(ValueError):
         force_closure(np.zeros((8, 5)))
+
+
+def test_the_cross_polytope_contains_exactly_its_inscribed_ball():
+    # +-e_i: a hull whose inradius is 1 / sqrt(6), known on paper
+    W = np.vstack([np.eye(6), -np.eye(6)])
+    assert contains_ball(W, 0.99 / math.sqrt(6))
+    assert not contains_ball(W, 1.01 / math.sqrt(6))
+
+
+@pytest.mark.parametrize("points, mu", [(equator_contacts(3), 0.5), (TETRA, 0.5), (equator_contacts(4), 0.3)])
+def test_contains_ball_never_claims_more_than_the_epsilon(points, mu):
+    W = primitive_wrenches(points, points, mu, ORIGIN, 1.0)
+    eps = force_closure(W)[1]
+    assert eps > 0.05
+    assert not contains_ball(W, 1.001 * eps)  # sound: never a ball the hull does not hold
+    assert contains_ball(W, eps / math.sqrt(6) * 0.99)  # a cross-polytope fits inside the epsilon ball
+
+
+@pytest.mark.parametrize("points, mu, expected", [
+    (equator_contacts(3), 0.5, True), (TETRA, 0.5, True), (ANTIPODAL, 5.0, False),
+    (equator_contacts(3), 0.0, False), (equator_contacts(3), 1e-6, False), (equator_contacts(3), 3e-6, True)])
+def test_is_force_closure_on_paper_cases(points, mu, expected):
+    # mu = 1e-6 on the equator: epsilon ~ 4.5e-7, under the margin; 3e-6: ~1.4e-6, over it
+    W = primitive_wrenches(points, points, mu, ORIGIN, 1.0)
+    assert is_force_closure(W) is expected
+    assert force_closure(W)[0] is expected
+
+
+def test_is_force_closure_agrees_with_the_hull_on_random_grasps():
+    rng = np.random.default_rng(7)
+    answers = []
+    for _ in range(400):
+        k = int(rng.integers(2, 5))
+        P = rng.normal(size=(k, 3))
+        P /= np.linalg.norm(P, axis=1, keepdims=True)
+        N = P + rng.normal(scale=rng.choice([0.0, 0.01, 0.3]), size=(k, 3))
+        N /= np.linalg.norm(N, axis=1, keepdims=True)
+        W = primitive_wrenches(0.04 * P, N, float(rng.choice([0.0, 1e-6, 3e-6, 0.1, 0.8])), ORIGIN, 0.04)
+        answers.append((is_force_closure(W), force_closure(W)[0]))
+    assert all(a == b for a, b in answers)
+    assert 20 < sum(b for _, b in answers) < 380  # both answers well represented
 
 
 # ----------------------------------------------------------------------- force ellipsoid
