@@ -155,10 +155,9 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     if down is None:
         return None
     for h in o.lifts_m:
-        key = (c.q.tobytes(), c.X_GO.tobytes(), c.p[f].tobytes(), c.n[f].tobytes(), f, h)
-        if key not in s.lifts:  # a node's finger is lifted at each step it tries
-            s.lifts[key] = _lifted(s, c.q, f, X_WO, c.p[f], c.n[f], h, rng)
-        up_a = s.lifts[key]
+        # a node's finger is lifted at each step it tries
+        up_a = s.memoised(("lifted", c.q.tobytes(), c.X_GO.tobytes(), c.p[f].tobytes(), c.n[f].tobytes(), f, h),
+                          lambda: _lifted(s, c.q, f, X_WO, c.p[f], c.n[f], h, rng))
         up_b = _lifted(s, down, f, X_WO, p[f], n[f], h, rng)
         if up_a is None or up_b is None:
             continue

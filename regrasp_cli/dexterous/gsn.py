@@ -47,6 +47,9 @@ from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.spatial import inverse
 
 
+MEMO_ENTRIES = 20_000  # results :meth:`GsScratch.memoised` keeps (contact candidates: ~3 kB each)
+
+
 @dataclass(frozen=True)
 class GsOptions:
     friction: float = 0.8
@@ -86,7 +89,7 @@ class GsScratch:
         self.failures: dict[str, int] = {}  # why GS_n paths failed, per check
         self._liftable: dict[bytes, tuple[int, ...]] = {}
         self._closed: dict[tuple, bool] = {}
-        self.lifts: dict[tuple, np.ndarray | None] = {}  # gait._lifted's, per finger, configuration and height
+        self._memo: dict[tuple, object] = {}  # :meth:`memoised`
         # collision pairs of each finger (and of all, None): with the object (the eroded
         # fingertips' model), with the palm and the other fingers (the exact one's)
         pairs = hm.pair_fingers
@@ -100,6 +103,15 @@ class GsScratch:
         if without is not None:
             p, n = np.delete(p, without, axis=0), np.delete(n, without, axis=0)
         return closure(p, n, self.options.friction, self.centre, self.rho)
+
+    def memoised(self, key: tuple, make):
+        """``make()``, remembered under ``key`` (a helper's name and arguments; ``make``
+        pure) for this query; forgotten all at once past ``MEMO_ENTRIES`` (tens of MB)."""
+        if key not in self._memo:
+            if len(self._memo) >= MEMO_ENTRIES:
+                self._memo.clear()
+            self._memo[key] = make()
+        return self._memo[key]
 
     def closed(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> bool:
         """Force closure with the validator's margin (:meth:`closure` > 0) of the contacts

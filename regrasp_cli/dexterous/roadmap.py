@@ -116,7 +116,12 @@ def _candidates(s: GsScratch, X_GO: np.ndarray, f: int) -> tuple[np.ndarray, np.
     """Contact candidates of finger ``f`` with the object at ``X_GO``: indices (c,) of
     surface samples whose fingertip centre lies in the finger's workspace, where the
     fingertip touches the surface only at the contact (:attr:`GsScratch.clear`) and whose
-    normal faces the closing fingertip, and the nearest workspace sample of each (c,)."""
+    normal faces the closing fingertip, and the nearest workspace sample of each (c,);
+    memoised (a node is expanded, and its fingers step, many times)."""
+    return s.memoised(("candidates", X_GO.tobytes(), f), lambda: _find_candidates(s, X_GO, f))
+
+
+def _find_candidates(s: GsScratch, X_GO: np.ndarray, f: int) -> tuple[np.ndarray, np.ndarray]:
     ws, r = s.workspaces[f], s.hand.radii[f]
     c_G = (s.sampled.points + r * s.sampled.normals) @ X_GO[:3, :3].T + X_GO[:3, 3]
     inside = np.nonzero((s.hm.voxels(s.workspaces)[f].lookup(c_G) >= 0) & s.clear)[0]

@@ -143,3 +143,18 @@ def test_fingertips_on_their_contacts_are_free_and_pressed_into_the_object_colli
         X[:3, 3] += 0.004 * (c.X_GO[:3, :3] @ c.n[finger])  # the surface 4 mm past the fingertip
         assert s.collides(X, c.q)
         assert s.finger_collides(c.q, finger)  # the object is where collides put it
+
+
+def test_memoised_results_are_the_helpers_own_before_and_after_the_memo_is_forgotten(gs, monkeypatch):
+    import regrasp_cli.dexterous.gsn as gsn
+    monkeypatch.setattr(gsn, "MEMO_ENTRIES", 2)
+    calls = []
+
+    def make(k):
+        calls.append(k)
+        return 10 * k
+
+    s = gs[0]
+    got = [s.memoised(("test", k), lambda k=k: make(k)) for k in (1, 2, 1, 3, 1)]
+    assert got == [10, 20, 10, 30, 10]
+    assert calls == [1, 2, 3, 1]  # 1 remembered once, then forgotten when 3 filled the memo
