@@ -42,7 +42,7 @@ from regrasp_cli.dexterous.transfer import interpolate, poses_between
 from regrasp_cli.grasp.single import GraspOptions, HandModel, grasp_for_frame
 from regrasp_cli.grasp.surface import Surface as SampledSurface
 from regrasp_cli.grasp.workspace import FingerWorkspace
-from regrasp_cli.model.collision import CollisionWorld
+from regrasp_cli.model.collision import CollisionWorld, cold_start
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.spatial import inverse
 
@@ -170,11 +170,30 @@ class GsScratch:
         The fingers' own pairs are checked with exact fingertips only: the eroded ones
         overlap only where these do."""
         hm, ex = self.hm, self._exact
-        pin.updateGeometryPlacements(hm.robot.model, hm.data, hm.gm, hm.gd, hm.robot.to_pin(q))
-        if any(pin.computeCollision(hm.gm, hm.gd, k) for k in self._object_pairs[finger]):
+        objects, hand = self._pair_sets[finger]
+        pin.updateGeometryPlacements(hm.robot.model, hm.data, hm.gm, objects, hm.robot.to_pin(q))
+        if pin.computeCollisions(hm.gm, objects, True):
             return True
-        pin.updateGeometryPlacements(ex.robot.model, hm.data, ex.gm, ex.gd)  # the joints just placed
-        return any(pin.computeCollision(ex.gm, ex.gd, k) for k in self._hand_pairs[finger])
+        pin.updateGeometryPlacements(ex.robot.model, hm.data, ex.gm, hand)  # the joints just placed
+        return pin.computeCollisions(ex.gm, hand, True)
+
+    @cached_property
+    def _pair_sets(self) -> dict[int | None, tuple[pin.GeometryData, pin.GeometryData]]:
+        """Per finger (None: all), scratch of the eroded model with only the finger's
+        object pairs active, and of the exact one with only its hand pairs: one call into
+        coal checks each set (pair by pair from Python cost as much again)."""
+        out = {}
+        for f in self._object_pairs:
+            sets = []
+            for gm, pairs in ((self.hm.gm, self._object_pairs[f]), (self._exact.gm, self._hand_pairs[f])):
+                gd = gm.createData()
+                cold_start(gd)
+                gd.deactivateAllCollisionPairs()
+                for k in pairs:
+                    gd.activateCollisionPair(k)
+                sets.append(gd)
+            out[f] = tuple(sets)
+        return out
 
     def place(self, X_GO: np.ndarray) -> None:
         """Put the object at ``X_GO`` (4, 4) for the collision checks that follow."""
