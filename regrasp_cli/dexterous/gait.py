@@ -154,6 +154,8 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
             return None
     if down is None:
         return None
+    if s.finger_collides(down, f):  # every lift's last segment ends there
+        return None
     for h in o.lifts_m:
         # a node's finger is lifted at each step it tries
         up_a = s.memoised(("lifted", c.q.tobytes(), c.X_GO.tobytes(), c.p[f].tobytes(), c.n[f].tobytes(), f, h),
