@@ -223,13 +223,18 @@ def regrasp_to(s: GsScratch, c: GsConfig, end: GsConfig, rng: np.random.Generato
     """Regrasps from ``c`` to ``end``'s contacts and joints, the object still at their
     (common) pose: one step per finger whose joints differ, straight to its contact in
     ``end``, in the first order that is feasible (``first``, then the fingers' other
-    orders, ``orders`` at most); None when none is."""
+    orders, ``orders`` at most); None when none is.  Orders that begin alike share their
+    first steps (each step is a pure function of the fingers moved before it)."""
     idx = s.hm.hand.finger_idx
     moved = [f for f in range(len(c.p)) if not np.array_equal(c.q[idx[f]], end.q[idx[f]])]
+    tried: dict[tuple[int, ...], Regrasp | None] = {}  # by the fingers moved, in order
     for order in itertools.islice(itertools.chain([first or moved], itertools.permutations(moved)), orders + 1):
         state, steps = c, []
-        for f in order:
-            step = finger_step(s, state, f, end.p[f], end.n[f], rng, o, q_down=end.q)
+        for k, f in enumerate(order):
+            key = tuple(order[:k + 1])
+            if key not in tried:
+                tried[key] = finger_step(s, state, f, end.p[f], end.n[f], rng, o, q_down=end.q)
+            step = tried[key]
             if step is None:
                 break
             steps.append(step)

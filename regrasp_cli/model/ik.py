@@ -82,8 +82,9 @@ def _solve(robot: Robot, frames: tuple[int, ...], q_seed: np.ndarray, idx: np.nd
                     break
             e = res[0][0] if len(res) == 1 else np.concatenate([r[0] for r in res])
             J = (Js[0] if len(Js) == 1 else np.vstack(Js))[:, cols]
-            dq = np.clip(_dls(J, e, options.damping), -options.max_step, options.max_step)
-            q[idx] = np.clip(q[idx] + dq, lo, hi)
+            # np.minimum/maximum: np.clip's own checks cost as much again here
+            dq = np.minimum(np.maximum(_dls(J, e, options.damping), -options.max_step), options.max_step)
+            q[idx] = np.minimum(np.maximum(q[idx] + dq, lo), hi)
         if best is None or ep + 0.1 * er < best.position_error + 0.1 * best.rotation_error:
             best = IKResult(q, False, ep, er, iters)
     return IKResult(best.q, False, best.position_error, best.rotation_error, iters)
