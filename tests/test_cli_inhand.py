@@ -189,3 +189,18 @@ def test_the_fingers_keep_off_a_wall_the_open_hand_would_hit(tmp_path, cache_dir
     d = json.loads(out.read_text())
     assert [o["name"] for o in d["obstacles"]] == ["wall"]
     assert validate_plan(out).valid
+
+
+def test_progress_counts_every_expansion_of_every_tree(cache_dir, planned):
+    """The spinner's count: one call per expansion, over the restarts' trees, against the
+    budget, ending at the outcome's expansions (and the same plan as without it)."""
+    from regrasp_cli.dexterous.task import load_inhand_problem, plan_inhand
+
+    problem = load_inhand_problem(SCENE, cache_dir)
+    calls = []
+    out = plan_inhand(problem, cache_dir, problem.spec.planning.seed, lambda done, budget: calls.append((done, budget)))
+    assert out.failure is None
+    n = out.stats["iterations"]
+    assert calls == [(k, problem.spec.planning.nodes) for k in range(1, n + 1)]
+    _, d = planned
+    assert d["stats"]["iterations"] == n

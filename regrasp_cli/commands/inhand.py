@@ -27,9 +27,13 @@ def run_inhand_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | No
     if mode is not None:
         problem = replace(problem, spec=replace(problem.spec, planning=replace(problem.spec.planning, mode=mode)))
     seed = problem.spec.planning.seed if seed is None else seed
-    with console.status("planning the finger gaits" + (" (building the roadmap if missing)"
-                                                       if problem.spec.planning.mode == "multi-query" else "")):
-        out = plan_inhand(problem, cache_dir, seed)
+    what = "planning the finger gaits" + (" (building the roadmap if missing)"
+                                          if problem.spec.planning.mode == "multi-query" else "")
+    with console.status(what) as status:
+        def progress(done: int, budget: int) -> None:
+            if done % 25 == 0:  # a redraw costs more than an expansion's bookkeeping
+                status.update(f"{what}: {done} of {budget} expansions")
+        out = plan_inhand(problem, cache_dir, seed, progress)
     plan = make_inhand_plan(problem, out, seed, out_file, cache_dir, timings)
     write_plan(out_file, plan)
     st = out.stats

@@ -28,6 +28,7 @@ Frames: the grasp frame G (fixed), the object frame O; metres, radians.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -353,10 +354,11 @@ def _extend(s: GsScratch, tree: Tree, target: np.ndarray, to_goal: bool, goal_fa
 
 
 def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Generator,
-         o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions()
-         ) -> tuple[list[Piece] | None, Tree, RoadmapStats]:
+         o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions(),
+         progress: Callable[[], None] | None = None) -> tuple[list[Piece] | None, Tree, RoadmapStats]:
     """Grow the tree from ``start`` until a node is at ``X_goal`` (4, 4, grasp frame): the
-    transfers and regrasps from the start to it, or None within ``o.nodes`` expansions."""
+    transfers and regrasps from the start to it, or None within ``o.nodes`` expansions.
+    ``progress()`` is called after each expansion."""
     tree = Tree()
     tree.add(start, -1, [])
     stats = RoadmapStats(start_liftable=len(s.liftable(start)))
@@ -366,6 +368,8 @@ def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Gener
         to_goal = rng.random() < o.goal_bias
         target = X_goal if to_goal else _random_pose(start.X_GO, o.box_m, rng)
         j = _extend(s, tree, target, to_goal, goal_fails, rng, o, g)
+        if progress is not None:
+            progress()
         if j is None:
             continue
         if _distance(tree.nodes[j].X_GO, X_goal, s.rho) < 1e-9:
@@ -396,7 +400,8 @@ def connect(s: GsScratch, a: GsConfig, b: GsConfig, rng: np.random.Generator, o:
 
 
 def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.Generator,
-                 o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions()
+                 o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions(),
+                 progress: Callable[[], None] | None = None
                  ) -> tuple[list[Piece] | None, tuple[Tree, Tree], RoadmapStats]:
     """Two trees, from ``start`` and from ``goal`` (a grasp at the goal pose), grown by
     :func:`join_trees`: the start tree's path to its node, the join and the goal tree's
@@ -404,12 +409,12 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
     grasp at its pose); or None within ``o.nodes`` expansions.  (The single-query version
     of §V adds both configurations to the graph; our goal is a pose, any grasp there will
     do, so ``goal`` is one such grasp, and a start-tree node at the goal pose ends the
-    search as in :func:`grow`.)"""
+    search as in :func:`grow`.)  ``progress()`` is called after each expansion."""
     trees = (Tree(), Tree())
     trees[0].add(start, -1, [])
     trees[1].add(goal, -1, [])
     stats = RoadmapStats(start_liftable=len(s.liftable(start)))
-    joined = join_trees(s, trees, rng, o, g, stats, at_goal=True)
+    joined = join_trees(s, trees, rng, o, g, stats, at_goal=True, progress=progress)
     stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
     if joined is None:
         return None, trees, stats
@@ -418,14 +423,16 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
 
 
 def join_trees(s: GsScratch, trees: tuple[Tree, Tree], rng: np.random.Generator, o: RoadmapOptions,
-               g: GaitOptions, stats: RoadmapStats, at_goal: bool = False) -> tuple[int, int, list[Piece]] | None:
+               g: GaitOptions, stats: RoadmapStats, at_goal: bool = False,
+               progress: Callable[[], None] | None = None) -> tuple[int, int, list[Piece]] | None:
     """Grow the two trees in turn as :func:`grow` grows one, each towards the other's
     newest node (RRT-Connect's aim; with ``o.aim_newest`` off, the other's root pose) or a
     random pose near its own root; a new node is joined to the other tree's two nearest
     nodes within ``o.connect_rad`` (:func:`connect`).  The first tree's node ``a``, the
     second's ``b`` and the pieces from a to b; or None within ``o.nodes`` expansions.
     With ``at_goal``, a first-tree node at the second tree's root pose ends it too: ``b``
-    is then 0 and no pieces (any grasp at the goal pose will do)."""
+    is then 0 and no pieces (any grasp at the goal pose will do).  ``progress()`` is
+    called after each expansion."""
     aims = (trees[1].nodes[0].X_GO, trees[0].nodes[0].X_GO)
     goal_fails: tuple[dict[int, int], dict[int, int]] = ({}, {})
     for it in range(o.nodes):
@@ -436,6 +443,8 @@ def join_trees(s: GsScratch, trees: tuple[Tree, Tree], rng: np.random.Generator,
         aim = other.nodes[-1].X_GO if o.aim_newest else aims[k]
         target = aim if to_goal else _random_pose(tree.nodes[0].X_GO, o.box_m, rng)
         j = _extend(s, tree, target, to_goal, goal_fails[k], rng, o, g)
+        if progress is not None:
+            progress()
         if j is None:
             continue
         new = tree.nodes[j]

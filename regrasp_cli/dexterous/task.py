@@ -15,6 +15,7 @@ not join within their budget).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from time import perf_counter
@@ -154,9 +155,11 @@ def given_start(problem: InhandProblem, s: GsScratch, rng: np.random.Generator) 
     return GsConfig(spec.X_GO_start.copy(), p, n, q)
 
 
-def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> InhandOutcome:
+def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int,
+                progress: Callable[[int, int], None] | None = None) -> InhandOutcome:
     """Plan the reorientation; the outcome's pieces bring the object to the goal pose, or
-    its failure names the stage."""
+    its failure names the stage.  ``progress(done, budget)`` is called after each
+    single-query expansion."""
     spec, o = problem.spec, problem.spec.planning
     rng = np.random.default_rng(seed)
     t0 = perf_counter()
@@ -178,6 +181,7 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
         return _plan_multi_query(problem, s, cache_dir, start, goal, rng, options, out, stages, t0)
     t = perf_counter()
     pieces, iterations, kept = None, 0, 0
+    tick = None if progress is None else _ticker(progress, options.nodes)
     for k, budget in enumerate(tree_budgets(options.nodes, options.first_tree)):
         if k:  # fresh trees from fresh start and goal grasps
             start = given or start_config(s, spec.X_GO_start, rng, options) or start
@@ -185,9 +189,9 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
         out.start = start
         budgeted, gait = replace(options, nodes=budget), GaitOptions(gait_m=o.gait_m)
         if options.goal_tree:
-            pieces, _, st = grow_connect(s, start, goal, rng, budgeted, gait)
+            pieces, _, st = grow_connect(s, start, goal, rng, budgeted, gait, tick)
         else:
-            pieces, _, st = grow(s, start, spec.X_GO_goal, rng, budgeted, gait)
+            pieces, _, st = grow(s, start, spec.X_GO_goal, rng, budgeted, gait, tick)
         iterations, kept = iterations + st.iterations, kept + st.kept
         if pieces is not None:
             break
@@ -199,6 +203,17 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int) -> In
                                                     f"{'pairs of trees' if options.goal_tree else 'trees'}, {kept} nodes)")
         return _finish(out, s, stages, t0)
     return _smoothed(problem, s, pieces, rng, out, stages, t0)
+
+
+def _ticker(progress: Callable[[int, int], None], budget: int) -> Callable[[], None]:
+    """A per-expansion callback that reports the expansions done so far, over all trees."""
+    done = 0
+
+    def tick() -> None:
+        nonlocal done
+        done += 1
+        progress(done, budget)
+    return tick
 
 
 def _smoothed(problem: InhandProblem, s: GsScratch, pieces: list[Piece], rng: np.random.Generator,
