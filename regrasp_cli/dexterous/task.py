@@ -45,6 +45,10 @@ from regrasp_cli.scene import scene_object
 from regrasp_cli.store import Provenance, artefact_lock, read_artefact, robot_identity, sha256_params, write_artefact
 
 CONTACT_TOLERANCE = 0.002  # m: fingertip-object penetration allowed at a contact (as the grasp search)
+# options a query reads and the learning does not (the learning sets its own budget and aim
+# for each join): changing them must not make a user learn the roadmap again
+QUERY_ONLY = {"learn": ("query_expansions", "shortcuts"),
+              "roadmap": ("nodes", "goal_bias", "start_samples", "first_tree", "goal_tree")}
 GOAL_PROBES = 40  # RLG samples at the goal pose before it is called unreachable
 ROADMAP_FORMAT, ROADMAP_VERSION = "regrasp.inhand-roadmap", 1
 
@@ -252,12 +256,15 @@ def _plan_multi_query(problem: InhandProblem, s: GsScratch, cache_dir: Path | No
 
 def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: RoadmapOptions, g: GaitOptions) -> Provenance:
     """What a learned roadmap depends on: the robot, the object's geometry, the hand's
-    posture, the friction, where the object is held, the obstacles and the options."""
+    posture, the friction, where the object is held, the obstacles and the options the
+    learning reads (not a query's own: ``QUERY_ONLY``)."""
     spec = problem.spec
     plain = lambda a: (np.round(a, 9) + 0.0).tolist()  # noqa: E731 - -0.0 and 0.0 are one key
+    learning = {k: v for k, v in asdict(o).items() if k not in QUERY_ONLY["learn"]}
+    roadmap = {k: v for k, v in asdict(r).items() if k not in QUERY_ONLY["roadmap"]}
     params = {"hand": problem.hand, "q_fixed": plain(problem.q_fixed), "friction": spec.object.friction,
               "p_GO": plain(spec.X_GO_start[:3, 3]), "obstacles": [repr(x) for x in spec.obstacles],
-              "learn": asdict(o), "roadmap": asdict(r), "gait": asdict(g)}
+              "learn": learning, "roadmap": roadmap, "gait": asdict(g)}
     return Provenance(ROADMAP_FORMAT, ROADMAP_VERSION, {"urdf": problem.robot.urdf_sha256,
                                                         "robot_yaml": problem.robot.robot_yaml_sha256,
                                                         "mesh": mesh_sha256(problem.object),

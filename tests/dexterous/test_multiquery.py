@@ -109,3 +109,16 @@ def test_a_bad_mode_is_refused_with_its_field(tmp_path):
     with pytest.raises(InputError) as e:
         load_inhand_spec(_scene(tmp_path, mode="any"))
     assert "planning.mode" in str(e.value) and "multi-query" in str(e.value)
+
+
+def test_a_query_option_keeps_the_learned_roadmap_and_a_learning_option_does_not(tmp_path, cache_dir):
+    problem = load_inhand_problem(_scene(tmp_path), cache_dir)
+    o, r, g = LearnOptions(), RoadmapOptions(), GaitOptions()
+    key = lambda o, r: roadmap_provenance(problem, o, r, g).inputs["params"]  # noqa: E731
+    base = key(o, r)
+    # the query's budget and aim, and how many detours it cuts: the same roadmap
+    assert key(replace(o, query_expansions=600, shortcuts=5), replace(r, nodes=100, goal_bias=0.9)) == base
+    # what the learning reads: another roadmap
+    assert key(replace(o, roots=10), r) != base
+    assert key(o, replace(r, step_rad=0.2)) != base
+    assert key(o, replace(r, connect_rad=0.5)) != base
