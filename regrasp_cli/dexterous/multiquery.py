@@ -14,7 +14,8 @@ component.
 
 A query (:func:`query`) joins the start grasp and a grasp at the goal pose the same way,
 but exploring as the single-query trees do (``RoadmapOptions.goal_bias`` of the
-expansions aimed, the rest towards random poses: aimed joins failed on the cube), and follows the shortest route (the object's turn), each edge forwards or backwards
+expansions aimed, the rest towards random poses: aimed joins failed on the cube), and
+follows the shortest route (the object's turn), each edge forwards or backwards
 (transfers and regrasps are reversible), cutting detours where a direct link goes.
 Every edge ends exactly on its node's configuration, so the pieces chain.  The graph is
 a tree (each join adds one edge), so routes are long: docs/DESIGN-NOTES.md, session 16.
