@@ -47,7 +47,7 @@ from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.spatial import inverse
 
 
-MEMO_ENTRIES = 20_000  # results :meth:`GsScratch.memoised` keeps (contact candidates: ~3 kB each)
+MEMO_ENTRIES = 20_000  # results of each kind :meth:`GsScratch.memoised` keeps (contact candidates: ~3 kB each)
 
 
 @dataclass(frozen=True)
@@ -89,7 +89,7 @@ class GsScratch:
         self.failures: dict[str, int] = {}  # why GS_n paths failed, per check
         self._liftable: dict[bytes, tuple[int, ...]] = {}
         self._closed: dict[tuple, bool] = {}
-        self._memo: dict[tuple, object] = {}  # :meth:`memoised`
+        self._memo: dict[object, dict[tuple, object]] = {}  # :meth:`memoised`, per kind
         # collision pairs of each finger (and of all, None): with the object (the eroded
         # fingertips' model), with the palm and the other fingers (the exact one's)
         pairs = hm.pair_fingers
@@ -105,13 +105,16 @@ class GsScratch:
         return closure(p, n, self.options.friction, self.centre, self.rho)
 
     def memoised(self, key: tuple, make):
-        """``make()``, remembered under ``key`` (a helper's name and arguments; ``make``
-        pure) for this query; forgotten all at once past ``MEMO_ENTRIES`` (tens of MB)."""
-        if key not in self._memo:
-            if len(self._memo) >= MEMO_ENTRIES:
-                self._memo.clear()
-            self._memo[key] = make()
-        return self._memo[key]
+        """``make()``, remembered under ``key`` (a helper's name, then its arguments;
+        ``make`` pure) for this query.  Each helper's results are forgotten all at once
+        past ``MEMO_ENTRIES`` (tens of MB): samples at random poses, whose candidates are
+        never asked again, must not push out the lifts a tree's nodes reuse."""
+        memo = self._memo.setdefault(key[0], {})
+        if key not in memo:
+            if len(memo) >= MEMO_ENTRIES:
+                memo.clear()
+            memo[key] = make()
+        return memo[key]
 
     def closed(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> bool:
         """Force closure with the validator's margin (:meth:`closure` > 0) of the contacts
@@ -223,13 +226,14 @@ class GsScratch:
 
 def sample_config(s: GsScratch, X_GO: np.ndarray) -> GsConfig | None:
     """A configuration of GS_n with the object at ``X_GO``, or None (RLG sampling: the
-    contacts from the fingers' workspaces, the joints by IK)."""
+    contacts from the fingers' workspaces, the joints by IK, through the grasp search,
+    whose fingertips may touch each other: that is checked here)."""
     g, _ = grasp_for_frame(s.hm, s.workspaces, s.sampled, inverse(X_GO), 0, s.options.friction, s.rho, s.grasp)
     if g is None or not g.in_contact.all():
         return None
     q = s.hm.q.copy()
     q[s.hm.hand.idx] = g.finger_q
-    ok = s.holds(g.points, g.normals)
+    ok = s.holds(g.points, g.normals) and not s.collides(X_GO, q)
     return GsConfig(X_GO.copy(), g.points.copy(), g.normals.copy(), q) if ok else None
 
 

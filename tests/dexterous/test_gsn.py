@@ -129,13 +129,12 @@ def test_with_fingers_round_the_sphere_every_finger_may_let_go(cache_dir):
 def test_fingertips_on_their_contacts_are_free_and_pressed_into_the_object_collide(gs):
     """The contact tolerance (2 mm) lets a fingertip touch its contact, and a hand found
     free is free finger by finger; pushed 4 mm into the object a fingertip collides, for
-    that finger's check and for the whole hand's.  (The grasp search's samples may have
-    two fingers side by side touching: the roadmap's own sampling checks that.)"""
+    that finger's check and for the whole hand's."""
     s, mesh, configs = gs
     finger = 1
-    free = [c for c in configs if not s.collides(c.X_GO, c.q)]
-    assert len(free) >= 5
-    for c in free[:8]:
+    assert len(configs) >= 5
+    for c in configs[:8]:
+        assert not s.collides(c.X_GO, c.q)  # sampled configurations are free
         s.place(c.X_GO)
         for f in range(len(c.p)):
             assert not s.finger_collides(c.q, f)
@@ -158,3 +157,7 @@ def test_memoised_results_are_the_helpers_own_before_and_after_the_memo_is_forgo
     got = [s.memoised(("test", k), lambda k=k: make(k)) for k in (1, 2, 1, 3, 1)]
     assert got == [10, 20, 10, 30, 10]
     assert calls == [1, 2, 3, 1]  # 1 remembered once, then forgotten when 3 filled the memo
+    # another helper's results fill their own memo: "test"'s 3 and 1 stay remembered
+    assert [s.memoised(("other", k), lambda k=k: make(-k)) for k in (1, 2, 3)] == [-10, -20, -30]
+    assert [s.memoised(("test", k), lambda k=k: make(k)) for k in (3, 1)] == [30, 10]
+    assert calls == [1, 2, 3, 1, -1, -2, -3]

@@ -9,10 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 from scipy.spatial.transform import Rotation
-
-from conftest import ROOT
 
 from regrasp_cli.dexterous.gait import GaitOptions, Regrasp, Transfer, carry, finger_step, reduce_path, reversed_path
 from regrasp_cli.dexterous.gsn import GsScratch, gs_path
@@ -20,25 +17,12 @@ from regrasp_cli.dexterous.hand import tip_targets
 from regrasp_cli.dexterous.roadmap import (RoadmapOptions, _reach_ahead, _turns, aimed_regrasp, connect, grow,
                                            grow_connect, start_config, step_towards, tree_budgets)
 from regrasp_cli.dexterous.smooth import smooth
-from regrasp_cli.dexterous.surface import Surface
-from regrasp_cli.grasp.single import HandModel
-from regrasp_cli.grasp.surface import build_surface, sampling_step
-from regrasp_cli.grasp.workspace import hand_workspace
-from regrasp_cli.model.robot import load_robot
-from regrasp_cli.model.selfcollision import disabled_pairs
 from regrasp_cli.spatial import inverse
-
-R = 0.035
 
 
 @pytest.fixture(scope="module")
-def gs(cache_dir):
-    robot = load_robot(ROOT / "regrasp_cli" / "data" / "robots" / "hand4" / "robot.yaml")
-    mesh = trimesh.creation.icosphere(subdivisions=3, radius=R)
-    hm = HandModel(robot, "right", mesh, disabled_pairs(robot, cache_dir).links(), 0.002)
-    ws = hand_workspace(robot, "right", cache_dir=cache_dir)
-    sampled = build_surface(mesh, sampling_step(0.004), np.random.default_rng(0))
-    return GsScratch(hm, ws, sampled, Surface.of(mesh), R)
+def gs(hand4_ball):
+    return hand4_ball
 
 
 def _goal(angle: float, axis) -> np.ndarray:
