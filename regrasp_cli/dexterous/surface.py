@@ -19,6 +19,7 @@ from functools import cached_property
 import numpy as np
 import potpourri3d as pp3d
 import trimesh
+from scipy.spatial import cKDTree
 
 _INSIDE = 1e-6  # barycentric margin: a point on an edge or a vertex is moved this far inside
 
@@ -59,10 +60,44 @@ class Surface:
     def mesh(self) -> trimesh.Trimesh:
         return trimesh.Trimesh(self.V, self.F, process=False)
 
+    @cached_property
+    def _vertex_tree(self) -> cKDTree:
+        return cKDTree(self.V[np.unique(self.F)])
+
+    @cached_property
+    def _triangles(self) -> np.ndarray:
+        return self.V[self.F]
+
     def locate(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The contacts nearest the points ``p`` (n, 3): (tri (n,), uv (n, 2))."""
-        _, _, tri = trimesh.proximity.closest_point(self.mesh, p)
-        bary = trimesh.triangles.points_to_barycentric(self.V[self.F[tri]], p)
+        """The contacts nearest the points ``p`` (n, 3): (tri (n,), uv (n, 2)).
+
+        The nearest point is on a triangle whose bounding box meets the box round ``p``
+        that reaches its nearest vertex (trimesh's triangle tree); of two triangles as
+        near (an edge, a vertex), the one that faces ``p`` more.  trimesh's own
+        ``closest_point`` does the same but builds a vertex tree at every call, a
+        tenth of a planning run on a scan."""
+        p = np.asarray(p, float).reshape(-1, 3)
+        if len(p) == 0:
+            return np.zeros(0, np.intp), np.zeros((0, 2))
+        reach = self._vertex_tree.query(p)[0][:, None] + trimesh.tol.merge
+        hits, counts = self.mesh.triangles_tree.intersection_v(p - reach, p + reach)
+        hits, counts = hits.astype(np.intp), counts.astype(np.intp)
+        owner = np.repeat(np.arange(len(p)), counts)
+        close = trimesh.triangles.closest_point(self._triangles[hits], p[owner])
+        away = p[owner] - close
+        d2 = np.dot(away * away, [1.0, 1.0, 1.0])  # as trimesh rounds it: ties on an edge break alike
+        first = np.r_[0, np.cumsum(counts)[:-1]]
+        # the two nearest of each point's triangles, sorted as trimesh sorts them (its
+        # sort is not stable: a point on an edge must get the triangle trimesh gives)
+        two = np.array([g.argsort()[:2] if len(g) > 1 else [0, 0] for g in np.split(d2, first[1:])]) + first[:, None]
+        pick = two[:, 0].copy()
+        tied = (np.ptp(d2[two], axis=1) < trimesh.tol.merge) & np.all(np.abs(d2[two]) > trimesh.tol.merge, axis=1)
+        if tied.any():
+            t2 = two[tied]
+            facing = (self.mesh.face_normals[hits[t2]] * (away[t2] / d2[t2][..., None] ** 0.5)).sum(axis=2)
+            pick[tied] = t2[np.arange(len(t2)), facing.argmax(axis=1)]
+        tri = hits[pick]
+        bary = trimesh.triangles.points_to_barycentric(self._triangles[tri], p)
         return tri, bary[:, 1:]
 
 

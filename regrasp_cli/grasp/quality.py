@@ -204,6 +204,15 @@ def primitive_wrenches(
     return np.vstack(out) if out else np.zeros((0, 6))
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of 3-vectors along the last axis (broadcast), the same products and
+    differences in the same order, so bit for bit the same: without its axis handling,
+    a third of the time (the in-hand planner builds wrenches at every closure test)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
 def _point_wrenches(P: np.ndarray, N: np.ndarray, mu: float, c: np.ndarray, rho: float,
                     n_edges: int) -> np.ndarray:
     """:func:`primitive_wrenches` of point contacts, all contacts at once (the same
@@ -215,12 +224,12 @@ def _point_wrenches(P: np.ndarray, N: np.ndarray, mu: float, c: np.ndarray, rho:
     k = len(P)
     helper = np.zeros((k, 3))
     helper[np.arange(k), np.argmin(np.abs(N), axis=1)] = 1.0
-    t1 = np.cross(N, helper)
+    t1 = _cross(N, helper)
     t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(N, t1)
+    t2 = _cross(N, t1)
     a = 2.0 * np.pi * np.arange(n_edges) / n_edges
     F = -N[:, None] + mu * (np.cos(a)[None, :, None] * t1[:, None] + np.sin(a)[None, :, None] * t2[:, None])
-    tau = np.cross((P - c)[:, None], F)
+    tau = _cross((P - c)[:, None], F)
     return np.concatenate([F, tau / rho], axis=2).reshape(k * n_edges, 6)
 
 

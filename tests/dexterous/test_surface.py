@@ -59,3 +59,23 @@ def test_points_along_a_path_by_arc_length():
     path = np.array([[0, 0, 0], [1, 0, 0], [1, 2, 0]], float)
     q = along(path, np.array([0.0, 0.5, 1.0]))
     assert np.allclose(q, [[0, 0, 0], [1, 0.5, 0], [1, 2, 0]])
+
+
+@pytest.mark.parametrize("mesh", [trimesh.creation.box(extents=[0.06, 0.06, 0.06]),
+                                  trimesh.creation.icosphere(subdivisions=3, radius=0.035)],
+                         ids=["cube", "sphere"])
+def test_locate_finds_the_nearest_triangle_as_trimesh_does_on_edges_and_vertices_too(mesh):
+    """``locate`` keeps its own vertex tree; where a point is as near two triangles (on an
+    edge, over a vertex) it must give trimesh's answer, or plans would change in the last
+    bits: points on the surface, off it, on edges, at vertices and over them, one by one
+    and together."""
+    s = Surface.of(mesh)
+    rng = np.random.default_rng(0)
+    tri, uv = s.sample(rng, 200)
+    on = s.points(tri, uv)
+    for p in (on, on + 0.01 * rng.normal(size=on.shape), 0.5 * (s.V[s.F[tri, 0]] + s.V[s.F[tri, 1]]), s.V,
+              s.V[s.F[tri, 2]] + 0.01 * s.normals[tri]):
+        expected = trimesh.proximity.closest_point(s.mesh, p)[2]
+        assert np.array_equal(s.locate(p)[0], expected)
+        assert np.array_equal(np.concatenate([s.locate(p[k:k + 3])[0] for k in range(0, len(p), 3)]), expected)
+    assert s.locate(np.zeros((0, 3)))[0].size == 0

@@ -12,6 +12,7 @@ import pytest
 from regrasp_cli.grasp.quality import (
     FORCE_CLOSURE_TOL,
     GraspScores,
+    _cross,
     QualityWeights,
     combine_scores,
     contains_ball,
@@ -336,3 +337,15 @@ def test_grasp_quality_rejects_non_force_closure():
     assert s.centroid == pytest.approx(1.0) and s.curvature == pytest.approx(1.0)
     soft = grasp_quality(ANTIPODAL, ANTIPODAL, 0.5, ORIGIN, ANTIPODAL, np.zeros(2), contact="soft")
     assert soft.is_force_closure and 0 < soft.total <= 1
+
+
+@pytest.mark.parametrize("shape_a, shape_b", [((5, 3), (5, 3)), ((4, 1, 3), (4, 8, 3)), ((3,), (6, 3))])
+def test_the_wrenches_cross_product_is_numpys_bit_for_bit(shape_a, shape_b):
+    """The planner's plans are compared byte for byte across speed-ups: the hand-written
+    cross product must round exactly as np.cross does, on any scale and broadcast."""
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        a = rng.normal(size=shape_a) * 10.0 ** rng.uniform(-6, 3)
+        b = rng.normal(size=shape_b) * 10.0 ** rng.uniform(-6, 3)
+        assert np.array_equal(_cross(a, b), np.cross(a, b))
+    assert np.array_equal(_cross(np.eye(3), np.roll(np.eye(3), -1, axis=0)), np.roll(np.eye(3), -2, axis=0))  # x*y=z
