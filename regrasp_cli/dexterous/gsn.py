@@ -88,7 +88,6 @@ class GsScratch:
         self.generated = 0  # configurations generated (samples and edge ends)
         self.failures: dict[str, int] = {}  # why GS_n paths failed, per check
         self._liftable: dict[bytes, tuple[int, ...]] = {}
-        self._closed: dict[tuple, bool] = {}
         self._memo: dict[object, dict[tuple, object]] = {}  # :meth:`memoised`, per kind
         # collision pairs of each finger (and of all, None): with the object (the eroded
         # fingertips' model), with the palm and the other fingers (the exact one's)
@@ -119,12 +118,10 @@ class GsScratch:
     def closed(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> bool:
         """Force closure with the validator's margin (:meth:`closure` > 0) of the contacts
         but finger ``without``'s; memoised: a node's finger is asked at each step it tries."""
-        key = (p.tobytes(), n.tobytes(), without)
-        if key not in self._closed:
-            if without is not None:
-                p, n = np.delete(p, without, axis=0), np.delete(n, without, axis=0)
-            self._closed[key] = closed(p, n, self.options.friction, self.centre, self.rho)
-        return self._closed[key]
+        def test() -> bool:
+            q, m = (p, n) if without is None else (np.delete(p, without, axis=0), np.delete(n, without, axis=0))
+            return closed(q, m, self.options.friction, self.centre, self.rho)
+        return self.memoised(("closed", p.tobytes(), n.tobytes(), without), test)
 
     def holds(self, p: np.ndarray, n: np.ndarray, without: int | None = None) -> bool:
         """Do the contacts (but finger ``without``'s) hold the object (force closure)?"""
