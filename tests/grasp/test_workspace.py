@@ -226,3 +226,20 @@ def test_a_thumb_with_a_base_joint_keeps_fixing_its_first_joint(robot):
     thumb = next(i for i, f in enumerate(h.spec.fingers) if len(f.joints) > 3)
     assert list(ws_mod._fixed_first(robot, HAND, thumb, len(h.spec.fingers[thumb].joints) - 3)) == \
         list(range(len(h.spec.fingers[thumb].joints)))
+
+
+def test_sphere_voxels_name_the_biggest_sphere_holding_each_voxel():
+    """Every voxel centre of the map, and points off the grid, against the spheres
+    themselves: the first (biggest) sphere grown by the inflation that holds it, else -1."""
+    rng = np.random.default_rng(3)
+    radii = np.sort(rng.uniform(0.004, 0.02, 12))[::-1]
+    spheres = type("Spheres", (), {"centres": rng.uniform(-0.03, 0.03, (12, 3)), "radii": radii})()
+    vox = ws_mod.sphere_voxels(spheres, inflate=0.003)
+    ijk = np.indices(vox.index.shape).reshape(3, -1).T
+    p = vox.origin + vox.resolution * ijk
+    inside = np.linalg.norm(p[:, None] - spheres.centres[None], axis=-1) <= radii + 0.003
+    expected = np.where(inside.any(axis=1), np.argmax(inside, axis=1), -1)
+    assert (vox.index >= 0).sum() > 1000
+    np.testing.assert_array_equal(vox.lookup(p), expected)
+    far = vox.origin - 0.01 + np.zeros((1, 3))
+    assert vox.lookup(far)[0] == -1
