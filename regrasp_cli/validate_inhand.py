@@ -54,6 +54,17 @@ def _same(a: dict, b: dict) -> bool:
     return a.keys() == b.keys() and all(np.allclose(a[f][0], b[f][0], atol=1e-9) for f in a)
 
 
+def segment_poses(X_a: np.ndarray, X_b: np.ndarray, ts: np.ndarray) -> np.ndarray:
+    """(k, 4, 4) object poses at the fractions ``ts`` (k,) of the way from ``X_a`` to ``X_b``
+    (4, 4): position linear, rotation slerp; all ``X_b`` when the two are equal.  All at
+    once: a Slerp call costs ~0.3 ms, whatever its number of times."""
+    Xs = np.repeat(X_b[None], len(ts), axis=0)
+    if not np.array_equal(X_a, X_b):
+        Xs[:, :3, :3] = Slerp([0, 1], Rotation.from_matrix(np.stack([X_a[:3, :3], X_b[:3, :3]])))(ts).as_matrix()
+        Xs[:, :3, 3] = (1 - ts)[:, None] * X_a[:3, 3] + ts[:, None] * X_b[:3, 3]
+    return Xs
+
+
 class _Checker:
     def __init__(self, plan: Plan, inputs: Inputs):
         self.plan, self.inputs = plan, inputs
@@ -189,14 +200,11 @@ class _Checker:
         n = 0
         for i in range(len(q)):
             steps = 1 if i == 0 else max(1, int(np.ceil(np.abs(q[i] - q[i - 1]).max() / resolution)))
-            slerp = None if i == 0 else Slerp([0, 1], Rotation.from_matrix(X[i - 1:i + 1, :3, :3]))
-            for s in np.arange(1, steps + 1) / steps:
+            ts = np.arange(1, steps + 1) / steps
+            Xs = segment_poses(X[max(i - 1, 0)], X[i], ts)
+            for s, X_s in zip(ts, Xs):
                 qs = q[i] if i == 0 else q[i - 1] + s * (q[i] - q[i - 1])
-                Xs = X[i].copy()
-                if i:
-                    Xs[:3, :3] = slerp([s]).as_matrix()[0]
-                    Xs[:3, 3] = (1 - s) * X[i - 1, :3, 3] + s * X[i, :3, 3]
-                world.set_object_pose(Xs)
+                world.set_object_pose(X_s)
                 n += 1
                 if not world.is_free(qs):
                     pairs = ", ".join(f"{a}-{b}" for a, b in world.colliding_pairs(qs)[:3])

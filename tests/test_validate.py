@@ -749,3 +749,23 @@ def test_a_tiny_segment_late_in_a_plan_is_timed_within_rounding():
     short[1] = t[0] + 0.99 * d[0]
     issues = timing_issues(replace(phase, times=short), before, v, a)
     assert [(i.waypoint, i.check) for i in issues] == [(1, "timing")]
+
+
+def test_inhand_segment_poses_follow_the_shortest_turn_and_a_straight_line():
+    """The in-hand checker's poses between two waypoints: equal turns about one axis, the
+    position on the chord, the last pose the second waypoint's, a still object still."""
+    from scipy.spatial.transform import Rotation
+
+    from regrasp_cli.validate_inhand import segment_poses
+
+    X_a, X_b = np.eye(4), np.eye(4)
+    X_a[:3, :3] = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
+    X_b[:3, :3] = Rotation.from_rotvec([0.0, 0.2, 0.25]).as_matrix() @ X_a[:3, :3]
+    X_a[:3, 3], X_b[:3, 3] = [0.01, 0.0, 0.02], [0.03, -0.01, 0.02]
+    ts = np.arange(1, 6) / 5
+    Xs = segment_poses(X_a, X_b, ts)
+    steps = [Rotation.from_matrix(B[:3, :3] @ A[:3, :3].T).as_rotvec() for A, B in zip([X_a, *Xs[:-1]], Xs)]
+    np.testing.assert_allclose(steps, np.tile(np.array([0.0, 0.2, 0.25]) / 5, (5, 1)), atol=1e-12)
+    np.testing.assert_allclose(Xs[:, :3, 3], X_a[:3, 3] + ts[:, None] * (X_b[:3, 3] - X_a[:3, 3]), atol=1e-15)
+    np.testing.assert_allclose(Xs[-1], X_b, atol=1e-12)
+    assert np.array_equal(segment_poses(X_b, X_b, ts), np.repeat(X_b[None], 5, axis=0))
