@@ -108,7 +108,7 @@ def _positive(value, name: str) -> None:
 
 
 def build_options(scene_seed: int, seed: int | None, jobs: int, positions: int | None, orientations: int | None,
-                  target: int | None = None, weights: str | None = None):
+                  target: int | None = None, weights: str | None = None, pinch_frames: int | None = None):
     from dataclasses import replace
 
 
@@ -116,10 +116,12 @@ def build_options(scene_seed: int, seed: int | None, jobs: int, positions: int |
         _positive(value, name)
     options = BuildOptions(seed=scene_seed if seed is None else seed, jobs=jobs)
     g = options.grasp
-    if target is not None and target < 0:
-        raise InputError(None, "--target", f"expected an integer >= 0, found {target}")
+    for value, name in ((target, "--target"), (pinch_frames, "--pinch-frames")):
+        if value is not None and value < 0:
+            raise InputError(None, name, f"expected an integer >= 0, found {value}")
     g = replace(g, n_positions=positions or g.n_positions, n_orientations=orientations or g.n_orientations,
-                target=g.target if target is None else target)
+                target=g.target if target is None else target,
+                pinch_frames=g.pinch_frames if pinch_frames is None else pinch_frames)
     if weights is not None:
         from regrasp_cli.grasp.quality import QualityWeights
 

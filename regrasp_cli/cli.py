@@ -105,16 +105,21 @@ def grasps() -> None:
 @click.option("--orientations", type=int, default=None, help="Grasp-frame orientations (SO(3) grid).")
 @click.option("--target", type=int, default=None,
               help="Stop once this many distinct grasps are found (0: try every frame; default 120).")
+@click.option("--pinch-frames", type=int, default=None,
+              help="Fingertip hands: samples of the pinch pass run when the grid leaves the list short "
+                   "(0: none).")
 @click.option("--weights", type=str, default=None, metavar="FC,CENTROID,ELLIPSOID,CURVATURE",
               help="Weights of the quality terms (default 1,1,1,6 as in the paper).")
 @cache_option
 @click.pass_context
 def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, jobs: int,
-                 positions: int | None, orientations: int | None, target: int | None, weights: str | None) -> None:
+                 positions: int | None, orientations: int | None, target: int | None, pinch_frames: int | None,
+                 weights: str | None) -> None:
     """Compute the grasp list of each hand and store it in the cache (HDF5)."""
     from regrasp_cli.commands.report import run_grasps_build
 
-    run_grasps_build(scene, ctx.obj["cache_dir"], hand, seed, jobs, positions, orientations, target, weights)
+    run_grasps_build(scene, ctx.obj["cache_dir"], hand, seed, jobs, positions, orientations, target, weights,
+                     pinch_frames=pinch_frames)
 
 
 @grasps.command("show")

@@ -3,6 +3,7 @@ check the one-line error contract (exit 2, one `error:` line, no traceback)."""
 
 from __future__ import annotations
 
+import shutil
 from importlib.metadata import version
 from pathlib import Path
 
@@ -50,3 +51,11 @@ def assert_one_error_line(result: Result, *words: str, exit_code: int = 2) -> st
     for w in words:
         assert w in errors[0], (w, errors[0])
     return errors[0]
+
+
+def copy_artefacts(src: Path, dst: Path) -> Path:
+    """Copy the cache folder ``src`` to ``dst`` with its finished files only: not the
+    locks, nor the temp files of an artefact another test (or xdist worker) is writing
+    into the shared cache at that moment."""
+    shutil.copytree(src, dst, ignore=shutil.ignore_patterns("*.lock", ".*.tmp"))
+    return dst

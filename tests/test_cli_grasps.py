@@ -15,27 +15,20 @@ from cli_helpers import assert_one_error_line, needs_separate_stderr, run, scene
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT_YAML = ROOT / "configs" / "robots" / "humanoid43" / "robot.yaml"
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
-SMALL = ["--hand", "right", "--positions", "8", "--orientations", "64", "--target", "0", "--jobs", "1"]
+SMALL = ["--hand", "right", "--positions", "8", "--orientations", "64", "--target", "0", "--pinch-frames", "256",
+         "--jobs", "1"]
 
 pytestmark = needs_separate_stderr
 
 
-
-
-
-
-
-
-
-
 @pytest.fixture(scope="module")
 def built(problem, cache_dir):
-    """One small `grasps build` into the session cache: (result, path of the list)."""
+    """One small `grasps build` into the run's cache: (result, path of the list)."""
     from regrasp_cli.artefacts import build_options, grasp_list_path
 
     result = run("--cache-dir", cache_dir, "grasps", "build", SCENE_YAML, *SMALL)
-    path = grasp_list_path(Path(cache_dir).resolve(), problem, "right", build_options(0, None, 1, 8, 64, 0))
-    return result, path
+    options = build_options(0, None, 1, 8, 64, 0, pinch_frames=256)
+    return result, grasp_list_path(Path(cache_dir).resolve(), problem, "right", options)
 
 
 # --------------------------------------------------------------------------- build and show
@@ -220,7 +213,7 @@ def test_flat_box_obstacle_mesh_is_still_allowed(tmp_path):
 
 
 @pytest.mark.parametrize("option, value", [("--positions", "0"), ("--jobs", "0"), ("--orientations", "0"),
-                                           ("--positions", "-3"), ("--target", "-1")])
+                                           ("--positions", "-3"), ("--target", "-1"), ("--pinch-frames", "-1")])
 def test_bad_numbers(cache_dir, option, value):
     result = run("--cache-dir", cache_dir, "grasps", "build", SCENE_YAML, *SMALL, option, value)
     assert_one_error_line(result, option)
@@ -241,3 +234,5 @@ def test_weights_change_the_ranking_inputs(problem):
     a = provenance(problem, "right", build_options(0, None, 1, 8, 64, 0))
     b = provenance(problem, "right", build_options(0, None, 1, 8, 64, 0, "1,1,1,1"))
     assert a.inputs["params"] != b.inputs["params"] and a.inputs["mesh"] == b.inputs["mesh"]
+    c = provenance(problem, "right", build_options(0, None, 1, 8, 64, 0, pinch_frames=256))
+    assert c.inputs["params"] != a.inputs["params"]  # the pinch pass's size too

@@ -5,13 +5,12 @@ processes on one fresh cache build each artefact once, and the hashes each plan 
 are those of the files in the cache.
 
 The artefacts are the small ones of tests/test_cli_plan.py (20 grasps per hand, 12-node
-roadmaps), built once into the session cache and copied for each test."""
+roadmaps), built once into the run's cache and copied for each test."""
 
 from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -19,7 +18,7 @@ from pathlib import Path
 import h5py
 import pytest
 
-from cli_helpers import ROOT, SCENE_YAML, assert_one_error_line, needs_separate_stderr, run
+from cli_helpers import ROOT, SCENE_YAML, assert_one_error_line, copy_artefacts, needs_separate_stderr, run
 from regrasp_cli.store import sha256_file
 
 SMALL = ("--grasp-target", "20", "--roadmap-nodes", "12")
@@ -32,30 +31,31 @@ def plan(cache_dir: Path, out: Path, *args):
 
 
 @pytest.fixture(scope="module")
-def built(cache_dir, tmp_path_factory) -> Path:
-    """The session cache with the small artefacts (planning once builds what is missing)."""
-    out = tmp_path_factory.mktemp("trust") / "plan.json"
-    result = plan(cache_dir, out, "--no-check")
-    assert result.exit_code == 0, (result.output, result.exception)
+def built(cache_dir, default_plan) -> Path:
+    """The run's cache with the small artefacts (conftest.default_plan built what was missing)."""
     return Path(cache_dir)
 
 
 def _copy(built: Path, to: Path) -> Path:
-    shutil.copytree(built, to, ignore=shutil.ignore_patterns("*.lock"))
+    """The finished artefacts of ``built`` (not the locks, nor another worker's temp files)."""
+    copy_artefacts(built, to)
     return to
 
 
 def _used(cache: Path, key: str) -> Path:
-    """The artefact a `plan --no-build` of the small options reads from ``cache``, by the
-    key of its recorded hash (``grasps_right``, ``grasps_left``, ``roadmap``): the cache
-    also holds artefacts of other options, built by other tests."""
-    out = cache.parent / "probe.json"
-    result = plan(cache, out, "--no-build", "--no-check")
-    assert result.exit_code == 0, (result.output, result.exception)
-    digest = _recorded(out)[key]
-    out.unlink()
-    (path,) = [p for p in cache.glob("*/*.h5") if sha256_file(p) == digest]
-    return path
+    """The artefact a `plan` of the small options reads from ``cache`` (``grasps_right``,
+    ``grasps_left``, ``roadmap``), by the paths the planner itself computes: the cache
+    also holds artefacts of other options, built by other tests.  The tests check the plan
+    read it (the file named in its error line, or the hash it records)."""
+    from regrasp_cli.artefacts import build_options, grasp_list_path, roadmap_options
+    from regrasp_cli.roadmap.build import artefact_path
+    from regrasp_cli.scene import load_problem
+
+    problem = load_problem(SCENE_YAML, cache)
+    if key == "roadmap":
+        return artefact_path(cache, problem, roadmap_options(problem.spec, int(SMALL[3]), False, None))
+    options = build_options(problem.spec.planning.seed, None, 1, None, None, int(SMALL[1]))
+    return grasp_list_path(cache, problem, key.removeprefix("grasps_"), options)
 
 
 def _damage(path: Path, how: str) -> None:
@@ -111,7 +111,7 @@ def test_two_plans_on_a_fresh_cache_build_once_and_record_the_files_they_used(bu
     built by one of them, the other waits and reuses them."""
     cache = tmp_path / "cache"
     for folder in ("self_collision", "workspace"):
-        shutil.copytree(built / folder, cache / folder)
+        copy_artefacts(built / folder, cache / folder)
     env = dict(os.environ, COLUMNS="250", PYTHONPATH=str(ROOT))
     outs = [tmp_path / f"plan{i}.json" for i in (0, 1)]
     procs = [subprocess.Popen([sys.executable, "-m", "regrasp_cli.cli", "--cache-dir", str(cache), "plan",
@@ -183,7 +183,7 @@ def test_cache_dir_is_accepted_after_the_subcommand(built, tmp_path):
     """`plan S --cache-dir D` uses D: with only the self-collision pairs in it and
     --no-build, the missing artefact named (the placements, loaded first) is D's."""
     d = tmp_path / "elsewhere"
-    shutil.copytree(built / "self_collision", d / "self_collision")
+    copy_artefacts(built / "self_collision", d / "self_collision")
     result = run("plan", SCENE_YAML, "-o", tmp_path / "plan.json", *SMALL, "--no-build", "--cache-dir", d)
     assert_one_error_line(result, str(d / "placements"), "no such artefact")
 

@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from cli_helpers import SCENE_YAML, assert_one_error_line, needs_separate_stderr, run, scene_dict, write_scene
+from cli_helpers import assert_one_error_line, needs_separate_stderr, run, scene_dict, write_scene
 
 pytestmark = needs_separate_stderr
 
@@ -84,17 +84,18 @@ def join(first: dict, second: dict) -> dict:
 
 
 @pytest.fixture(scope="module")
-def regrasp(cache_dir, tmp_path_factory) -> tuple[Path, dict]:
+def regrasp(cache_dir, default_plan) -> tuple[Path, dict]:
     """The joined plan (see the module docstring): its file, beside its halves (the paths
-    they record are relative to that folder), and its dict."""
-    d = tmp_path_factory.mktemp("plan2")
+    they record are relative to that folder), and its dict.  The first half is the
+    default scene's plan of conftest.default_plan."""
+    d = default_plan.parent
     s = scene_dict()
     s["task"].update(object_start=BACK_START, object_goal=BACK_GOAL)
-    back = write_scene(d / "back.yaml", s)
-    first = _plan(cache_dir, SCENE_YAML, d / "there.json")  # builds the small artefacts when missing
-    second = _plan(cache_dir, back, d / "back.json")
+    back = write_scene(d / "plan2-back.yaml", s)
+    first = json.loads(default_plan.read_text())
+    second = _plan(cache_dir, back, d / "plan2-back.json")
     plan = join(first, second)
-    path = d / "regrasp.json"
+    path = d / "plan2-regrasp.json"
     path.write_text(json.dumps(plan, indent=1))
     return path, plan
 
@@ -152,7 +153,7 @@ def test_validate_rejects_a_jump_to_a_moved_intermediate_placement(regrasp):
     d = copy.deepcopy(plan)
     middle = next(p for p in d["placements"] if p["id"] == "middle")
     middle["pose"][0][3] += 0.05
-    bad = _write(path.parent / "jump.json", d)  # beside the plan: the paths it records still resolve
+    bad = _write(path.parent / "plan2-jump.json", d)  # beside the plan: the paths it records still resolve
     result = run("validate", bad, "--resolution", "0.1", "--cartesian-step", "0.05")
     assert result.exit_code == 1, (result.output, result.stderr, result.exception)
     out = result.stdout

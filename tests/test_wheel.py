@@ -7,19 +7,21 @@ through a ``.pth`` file adding this environment's site-packages after its own (w
 ``.pth`` files: pinocchio and coal live in a cmeel prefix), so that the test does not
 download them again; the new environment's own copy of `regrasp_cli` comes first on
 ``sys.path`` (this checkout's editable finder only answers what the path does not), and
-the test checks that it is the one imported.  Small artefacts (20 grasps per
-hand, 12-node roadmaps) keep it short; the robot's self-collision pairs, which depend only
-on the robot files, are taken from the session cache."""
+the test checks that it is the one imported.  The installed copy plans with the small
+artefacts (20 grasps per hand, 12-node roadmaps) that the checkout built for
+conftest.default_plan, copied into its cache, and builds none: artefacts are keyed by the
+contents of their inputs, not by where the package is installed."""
 
 from __future__ import annotations
 
 import json
 import os
-import shutil
 import site
 import subprocess
 import sys
 from pathlib import Path
+
+from cli_helpers import copy_artefacts
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,7 +34,8 @@ def _run(args, cwd: Path, timeout: float = 900) -> subprocess.CompletedProcess:
     return done
 
 
-def test_the_wheel_installs_outside_the_checkout_and_plans_the_shipped_scene(problem, cache_dir, tmp_path):
+def test_the_wheel_installs_outside_the_checkout_and_plans_the_shipped_scene(problem, cache_dir, default_plan,
+                                                                              tmp_path):
     dist, venv, work = tmp_path / "dist", tmp_path / "venv", tmp_path / "work"
     _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--quiet", "-w", dist, ROOT], cwd=tmp_path)
     (wheel,) = dist.glob("regrasp-*.whl")
@@ -54,11 +57,12 @@ def test_the_wheel_installs_outside_the_checkout_and_plans_the_shipped_scene(pro
     scene = work / "scenes" / "desk_handover.yaml"
     assert "robot: builtin:humanoid43" in scene.read_text()
 
-    cache = tmp_path / "cache"
-    shutil.copytree(Path(cache_dir) / "self_collision", cache / "self_collision")
+    # the checkout's small artefacts serve the installed copy: keyed by the robot files'
+    # and the scene's contents, not by where they are installed
+    cache = copy_artefacts(Path(cache_dir), tmp_path / "cache")
     out = work / "plan.json"
-    _run([regrasp, "--cache-dir", cache, "plan", scene, "-o", out, "--grasp-target", "20", "--roadmap-nodes", "12"],
-         cwd=work)
+    _run([regrasp, "--cache-dir", cache, "plan", scene, "-o", out, "--grasp-target", "20", "--roadmap-nodes", "12",
+          "--no-build"], cwd=work)
     plan = json.loads(out.read_text())
     assert plan["status"] == "solved"
     urdf = (out.parent / plan["robot"]["urdf"]).resolve()

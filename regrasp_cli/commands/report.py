@@ -134,11 +134,12 @@ def provenance_table(file: Path, prov) -> Table:
 
 def run_grasps_build(scene: Path, cache_dir: Path, hand: str, seed: int | None, jobs: int,
                      positions: int | None, orientations: int | None, target: int | None = None,
-                     weights: str | None = None, console: Console | None = None) -> None:
+                     weights: str | None = None, console: Console | None = None,
+                     pinch_frames: int | None = None) -> None:
     from regrasp_cli.config import load_scene_spec
 
     spec = load_scene_spec(scene)
-    options = build_options(spec.planning.seed, seed, jobs, positions, orientations, target, weights)
+    options = build_options(spec.planning.seed, seed, jobs, positions, orientations, target, weights, pinch_frames)
     hands = ["right", "left"] if hand == "both" else [hand]
     build_grasp_lists(scene, cache_dir, hands, options, console or Console())
 

@@ -401,14 +401,15 @@ def read_grasp_list(path: Path, expected: Provenance | None = None) -> GraspList
 
 def load_or_build(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> GraspList:
     """The cached grasp list if fresh, else a new one (used by the online planner)."""
-    from regrasp_cli.store import is_fresh
+    from regrasp_cli.store import artefact_lock, is_fresh
 
     problem = load_problem(scene, cache_dir)
     prov = provenance(problem, hand, options)
     path = artefact_path(cache_dir, problem, hand, options)
-    if path.is_file() and is_fresh(path, prov):
-        return read_grasp_list(path, prov)
-    return build_grasps(scene, cache_dir, hand, options)[0]
+    with artefact_lock(path):  # another process building it: wait, then read its list
+        if path.is_file() and is_fresh(path, prov):
+            return read_grasp_list(path, prov)
+        return build_grasps(scene, cache_dir, hand, options)[0]
 
 
 def scores_of(g: GraspList, i: int) -> GraspScores:

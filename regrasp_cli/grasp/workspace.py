@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 from regrasp_cli.model.collision import cold_start
 from regrasp_cli.model.robot import Kinematics, Robot
 from regrasp_cli.spatial import inverse
-from regrasp_cli.store import Provenance, is_fresh, read_artefact, sha256_params, write_artefact
+from regrasp_cli.store import Provenance, is_fresh, read_artefact, robot_identity, sha256_params, write_artefact
 
 FORMAT, FORMAT_VERSION = "regrasp.workspace", 5  # 5: redundant fingers fix their trailing joints when the leading leave a plane
 
@@ -319,7 +319,10 @@ def hand_workspace(robot: Robot, hand: str, options: WorkspaceOptions = Workspac
     inputs = {"urdf": robot.urdf_sha256, "robot_yaml": robot.robot_yaml_sha256,
               "params": sha256_params({"hand": hand, **asdict(options)})}
     expected = Provenance(FORMAT, FORMAT_VERSION, inputs)
-    path = None if cache_dir is None else Path(cache_dir) / "workspace" / f"{hand}-{inputs['params'][:12]}.h5"
+    # the robot in the name, as for every artefact: two robots' right hands in one cache
+    # would otherwise overwrite each other's file (the provenance refusing the other's)
+    name = f"{robot_identity(robot)}-{hand}-{inputs['params'][:12]}.h5"
+    path = None if cache_dir is None else Path(cache_dir) / "workspace" / name
     if path is not None and path.is_file() and is_fresh(path, expected):
         a = read_artefact(path, expected)
         n = len(robot.hands[hand].spec.fingers)

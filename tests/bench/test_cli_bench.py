@@ -1,9 +1,7 @@
 """`regrasp bench` end to end on the default scene with the small artefacts the plan
-tests use (grasp lists of 20, roadmaps of 12 nodes), built once into a cache of this
-module (not the session cache: tests/bench runs before tests/grasp, whose determinism test
-expects the session cache to hold the right hand's finger workspace only):
-a 2-seed suite writes one record per run, each validated, with the summary, Table I and
-the plot; a run over its budget is recorded with its reason and the suite goes on; bad
+tests use (grasp lists of 20, roadmaps of 12 nodes, in the run's cache): a 2-seed suite
+(tests/bench/conftest.py, run once) writes one record per run, each validated, with the
+summary, Table I and the plot; a run over its budget is recorded with its reason and the suite goes on; bad
 input is one error line with exit 2."""
 
 from __future__ import annotations
@@ -12,38 +10,19 @@ import json
 from pathlib import Path
 
 import pytest
-import yaml
 
-from cli_helpers import SCENE_YAML, assert_one_error_line, needs_separate_stderr, run
+from bench.conftest import SEEDS, suite
+from cli_helpers import assert_one_error_line, needs_separate_stderr, run
 
 PNG = b"\x89PNG\r\n\x1a\n"
-# two seeds the tiny artefacts solve (seed 1 does not since the queries keep 5 mm of
-# clearance: its place query finds no certified path through a 12-node roadmap)
-SEEDS = (0, 2)
-
-
-def suite(tmp_path: Path, **fields) -> Path:
-    d = {"format": "regrasp.bench/1", "name": "tiny", "scenes": [str(SCENE_YAML)], "planners": ["roadmap"],
-         "seeds": list(SEEDS), "budget_s": 120, "roadmap_nodes": 12, "grasp_target": 20}
-    d.update(fields)
-    p = tmp_path / "suite.yaml"
-    p.write_text(yaml.safe_dump(d))
-    return p
-
-
-@pytest.fixture(scope="module")
-def cache_dir(tmp_path_factory) -> Path:
-    return tmp_path_factory.mktemp("bench-cache")
 
 
 def records(out: Path) -> list[dict]:
     return [json.loads(line) for line in (out / "runs.jsonl").read_text().splitlines()]
 
 
-def test_tiny_suite_end_to_end(cache_dir, tmp_path):
-    out = tmp_path / "results"
-    r = run("--cache-dir", cache_dir, "bench", suite(tmp_path), "-o", out, "--jobs", "2")
-    assert r.exit_code == 0, (r.output, r.exception)
+def test_tiny_suite_end_to_end(tiny_on_loky):
+    out, stdout = tiny_on_loky
     recs = records(out)
     assert [(x["planner"], x["seed"]) for x in recs] == [("roadmap", s) for s in SEEDS]
     for x in recs:
@@ -63,7 +42,7 @@ def test_tiny_suite_end_to_end(cache_dir, tmp_path):
     meta = json.loads((out / "meta.json").read_text())
     assert "pin" in meta["machine"]["libraries"] and "coal" in meta["machine"]["libraries"]
     assert meta["runs"] == 2 and meta["offline"]["desk_handover"]["grasp lists"]["status"] in ("built", "cached")
-    assert "Table I: desk_handover, roadmap" in r.stdout
+    assert "Table I: desk_handover, roadmap" in stdout
 
 
 def test_a_run_over_budget_is_a_recorded_failure(cache_dir, tmp_path):

@@ -1,7 +1,7 @@
-"""`regrasp bench --backend dask`: the tiny 2-seed suite of test_cli_bench (grasp lists of
-20, roadmaps of 12 nodes, its own cache) on a local Dask cluster of two worker processes
-gives the same records and plans, apart from times, as on loky processes; each run is
-still forked with its budget inside the (daemonic) Dask worker.  Without --scheduler, or
+"""`regrasp bench --backend dask`: the tiny suite of tests/bench/conftest.py (grasp lists
+of 20, roadmaps of 12 nodes, the run's cache), its first seed on a local Dask cluster of
+one worker process, gives the same record and plan, apart from times, as on loky
+processes; the run is still forked with its budget inside the (daemonic) Dask worker.  Without --scheduler, or
 without the `distributed` package, the command is one error line with exit 2."""
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.test_cli_bench import SEEDS, cache_dir, records, suite  # noqa: F401 - cache_dir: the small-artefact cache
+from bench.conftest import SEEDS, suite
+from bench.test_cli_bench import records
 from cli_helpers import assert_one_error_line, needs_separate_stderr, run
 
 distributed = pytest.importorskip("distributed", reason="needs the dask extra: pip install 'regrasp[dask]'")
@@ -20,7 +21,7 @@ distributed = pytest.importorskip("distributed", reason="needs the dask extra: p
 
 @pytest.fixture(scope="module")
 def cluster():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as c:
         yield c
 
 
@@ -37,20 +38,20 @@ def plans(out: Path) -> dict[str, dict]:
     return {p.name: untimed(json.loads(p.read_text())) for p in sorted((out / "plans").glob("*.json"))}
 
 
-def test_the_tiny_suite_on_a_dask_cluster_matches_loky(cache_dir, cluster, tmp_path):  # noqa: F811
-    file = suite(tmp_path)
-    on_loky, on_dask = tmp_path / "loky", tmp_path / "dask"  # same depth: same relative paths in the plans
-    r = run("--cache-dir", cache_dir, "bench", file, "-o", on_loky, "--jobs", "2")
+def test_the_tiny_suite_on_a_dask_cluster_matches_loky(cache_dir, cluster, tiny_on_loky):
+    """The suite's first seed on Dask: the record and the plan of that seed on loky."""
+    on_loky, _ = tiny_on_loky
+    on_dask = on_loky.with_name("dask")  # same depth: same relative paths in the plans
+    r = run("--cache-dir", cache_dir, "bench", on_loky.parent / "suite.yaml", "-o", on_dask, "--backend", "dask",
+            "--scheduler", cluster.scheduler_address, "--seeds", "1")
     assert r.exit_code == 0, (r.output, r.exception)
-    r = run("--cache-dir", cache_dir, "bench", file, "-o", on_dask, "--backend", "dask",
-            "--scheduler", cluster.scheduler_address)
-    assert r.exit_code == 0, (r.output, r.exception)
-    recs = records(on_dask)
-    assert [(x["planner"], x["seed"], x["solved"], x["validation"]["valid"]) for x in recs] == \
-        [("roadmap", s, True, True) for s in SEEDS]
-    assert all(x["peak_rss_mb"] > 0 for x in recs)
-    assert [untimed(x) for x in recs] == [untimed(x) for x in records(on_loky)]
-    assert plans(on_dask) == plans(on_loky) and len(plans(on_dask)) == 2
+    (rec,) = records(on_dask)
+    assert (rec["planner"], rec["seed"], rec["solved"], rec["validation"]["valid"]) == ("roadmap", SEEDS[0], True, True)
+    assert rec["peak_rss_mb"] > 0
+    (same,) = [x for x in records(on_loky) if x["seed"] == rec["seed"]]
+    assert untimed(rec) == untimed(same)
+    on_dask_plans = plans(on_dask)
+    assert list(on_dask_plans) == [rec["plan"]] and on_dask_plans[rec["plan"]] == plans(on_loky)[rec["plan"]]
     meta = json.loads((on_dask / "meta.json").read_text())
     assert meta["backend"] == f"dask at {cluster.scheduler_address}"
     assert f"joblib workers: dask at {cluster.scheduler_address}" in (on_dask / "summary.md").read_text()

@@ -127,12 +127,13 @@ def test_without_the_extra_the_error_names_it(monkeypatch):
 def test_the_whole_plan_runs_on_ompl_and_a_solved_one_is_valid(problem, lists, cache_dir, tmp_path):
     """With the default budget (3000 iterations a query) OMPL's RRT-Connect often fails the
     place or rest query, so the plan either fails at a transition with OMPL named, or is
-    solved and then must validate.  OMPL ran the grasp and carry queries of every attempt."""
+    solved and then must validate.  One attempt (one double grasp): OMPL ran its grasp and
+    carry queries."""
     from regrasp_cli.manip.record import make_plan
     from regrasp_cli.trajectory import write_plan
     from regrasp_cli.validate import validate_plan
 
-    options = OnlineOptions(planner="ompl-rrtconnect", jobs=1, ompl_time=NO_CLOCK)
+    options = OnlineOptions(planner="ompl-rrtconnect", jobs=1, ompl_time=NO_CLOCK, key_attempts=1)
     out = plan(problem, lists, None, options, PLAN_SEED)
     queries = out.transitions
     attempts = out.counts["key_attempts"]

@@ -7,7 +7,6 @@ another robot or obstacle set."""
 
 from __future__ import annotations
 
-import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,6 +14,8 @@ import networkx as nx
 import numpy as np
 import pytest
 import yaml
+
+from cli_helpers import copy_artefacts
 
 from regrasp_cli.errors import InputError, StaleArtefactError
 from regrasp_cli.model.collision import CollisionWorld, collision_world
@@ -39,7 +40,7 @@ def fresh_cache(tmp_path_factory, cache_dir: Path) -> Path:
     d = tmp_path_factory.mktemp("fresh")
     src = Path(cache_dir) / "self_collision"
     if src.is_dir():
-        shutil.copytree(src, d / "self_collision")
+        copy_artefacts(src, d / "self_collision")
     return d
 
 
@@ -245,7 +246,7 @@ def test_a_cached_roadmap_is_reused(graph, graph_path, problem, cache_dir):
 
 def test_a_missing_roadmap_is_refused_without_build(tmp_path, problem, cache_dir):
     d = tmp_path / "empty"
-    shutil.copytree(Path(cache_dir) / "self_collision", d / "self_collision")
+    copy_artefacts(Path(cache_dir) / "self_collision", d / "self_collision")
     with pytest.raises(InputError):
         load_or_build(SCENE_YAML, d, OPTS, build=False)
     assert not (d / "roadmap").exists()

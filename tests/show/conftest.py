@@ -1,7 +1,6 @@
-"""Fixtures of the viewer tests: one small plan of the default scene, planned once per
-session with the artefacts that tests/test_cli_plan.py uses (20 grasps per hand, 12
-nodes per elementary roadmap, in the session cache), and its page and key frames
-written once by `regrasp show`."""
+"""Fixtures of the viewer tests: the default scene's small plan (conftest.default_plan,
+which tests/test_cli_plan.py checks), and its page and key frames written once by
+`regrasp show`."""
 
 from __future__ import annotations
 
@@ -9,9 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from cli_helpers import SCENE_YAML, run
+from cli_helpers import run
 
-SMALL = ("--grasp-target", "20", "--roadmap-nodes", "12")
 PNG_SIZE = (640, 480)
 
 
@@ -21,12 +19,9 @@ def show_dir(tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def small_plan(cache_dir, show_dir) -> Path:
-    """A solved plan of the default scene (seed 0), its file."""
-    out = show_dir / "plan.json"
-    result = run("--cache-dir", cache_dir, "plan", SCENE_YAML, "-o", out, *SMALL, "--seed", 0, "--no-check")
-    assert result.exit_code == 0, (result.output, result.exception)
-    return out
+def small_plan(default_plan) -> Path:
+    """A solved plan of the default scene (seed 0), its file: conftest.default_plan."""
+    return default_plan
 
 
 @pytest.fixture(scope="session")

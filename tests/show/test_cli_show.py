@@ -34,7 +34,7 @@ def test_show_of_a_missing_plan(tmp_path):
 def test_show_of_a_failed_plan(small_plan, tmp_path):
     d = json.loads(small_plan.read_text())
     d.update(status="failed", failure={"stage": "exchange", "reason": "no collision-free exchange pose"}, phases=[])
-    failed = small_plan.parent / "failed.json"  # beside the plan: the paths it records stay valid
+    failed = small_plan.parent / "show-failed.json"  # beside the plan: the paths it records stay valid
     failed.write_text(json.dumps(d))
     out = tmp_path / "plan.html"
     line = assert_one_error_line(run("show", failed, "--html", out), str(failed), "status",
