@@ -610,7 +610,7 @@ class InhandPlanning:
     :mod:`regrasp_cli.dexterous.multiquery`, built and cached when missing)."""
 
     seed: int = 0
-    nodes: int = 6000  # a failed run: about 60-110 s on hand4 (docs/BENCHMARKS.md, session 19)
+    nodes: int = 6000  # a failed run: about 60-110 s on hand4 (docs/DESIGN-NOTES.md, "Budget and restarts")
     step_rad: float = 0.35
     gait_m: float = 0.012
     smooth: bool = True

@@ -18,7 +18,7 @@ expansions aimed, the rest towards random poses: aimed joins failed on the cube)
 follows the shortest route (the object's turn), each edge forwards or backwards
 (transfers and regrasps are reversible), cutting detours where a direct link goes.
 Every edge ends exactly on its node's configuration, so the pieces chain.  The graph is
-a tree (each join adds one edge), so routes are long: docs/DESIGN-NOTES.md, session 16.
+a tree (each join adds one edge), so routes are long: docs/DESIGN-NOTES.md, "Multi-query roadmap".
 
 Frames: the grasp frame G (fixed), the object frame O; metres, radians.
 """

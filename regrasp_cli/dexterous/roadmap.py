@@ -43,8 +43,8 @@ from regrasp_cli.spatial import inverse
 
 
 FACING = 0.2  # cosine: a fingertip closes on its contact within 78 deg of its normal, as the grasp
-# search asks (0.5 kept the cube's distal links off its faces a little more often, but halved
-# the ball's successes: docs/DESIGN-NOTES.md)
+# search asks (0.5 kept the cube's distal links off its faces a little more often, but cost
+# the ball many more of its successes: docs/DESIGN-NOTES.md, "Trees")
 
 
 @dataclass(frozen=True)

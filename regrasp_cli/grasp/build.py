@@ -7,8 +7,12 @@ antipodal pairs, tried only when the grid leaves the list short) -> one grasp at
 (:mod:`.single`), in parallel over forked processes -> force-closure filter and quality
 (:mod:`.quality`) -> near-duplicates removed -> sorted by quality -> HDF5 artefact.
 
-A grasp list depends only on the hand (URDF, robot.yaml), the object mesh, the friction
-coefficient and the options: it is context independent (no obstacles), as in the paper.
+A grasp list depends on the robot (URDF and the whole robot.yaml), the object mesh, the
+friction coefficient, the options, and today also on the scene: it keeps only the grasps
+whose hand clears the obstacles with the object at the task's start or goal pose
+(:class:`_Usable`), so the obstacles and both poses are hashed into its parameters
+(:func:`_params`).  This departs from the paper, whose lists are context independent and
+filtered against the environment online (§IV-A, §IV-B); docs/DESIGN-NOTES.md, "The list".
 Two grasps are near-duplicates when their hand poses differ by less than
 ``duplicate_distance`` in position and ``duplicate_angle`` in orientation; the better one
 is kept.  The result is deterministic for a given seed whatever the number of jobs.

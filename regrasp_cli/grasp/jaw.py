@@ -21,7 +21,8 @@ passes through a given point.  A jaw grasp is found the other way round:
    once closed (the fingertips may touch the object within the contact tolerance),
    gives no grasp.
 4. **Soft-finger force closure and quality** (:mod:`.quality`, ``contact="soft"``) at the
-   contacts found, the points on the object nearest to the closed pads.
+   contacts found: each a patch of the object's surface under the closed pad
+   (:func:`contact_patch`).
 """
 
 from __future__ import annotations

@@ -40,7 +40,7 @@ class OnlineOptions:
     """Options of `regrasp plan` (metres, radians, seconds)."""
 
     planner: str = "roadmap"  # or "rrt-connect": the single-query baseline of §VI, or its OMPL peer
-    # "ompl-rrtconnect" (optional extra; see plan/ompl_peer.py)
+    # "ompl-rrtconnect" (optional extra; see manip/ompl_peer.py)
     jobs: int = 2  # processes for the four queries (the result does not depend on it)
     approach_distance: float = 0.08  # pre-grasp offset of the hand before it closes
     lift_height: float = 0.06  # the object is lifted (and lowered) vertically by this

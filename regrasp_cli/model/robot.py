@@ -201,8 +201,9 @@ class Robot:
         return self.model.addFrame(pin.Frame(name, f.parentJoint, parent, X, pin.FrameType.OP_FRAME))
 
     def _hand_kind(self, h: HandSpec, finger_idx: tuple[np.ndarray, ...]) -> str:
-        """``jaw`` for two fingers of one prismatic joint each, else ``fingertips``
-        (unless robot.yaml states it; a stated jaw must be such a hand)."""
+        """``jaw`` for two fingers of one prismatic joint each, ``pads`` when a finger has
+        fewer than three joints, else ``fingertips`` (unless robot.yaml states it; a stated
+        jaw must be such a hand)."""
         jaw = len(finger_idx) == 2 and all(len(i) == 1 and self.prismatic[i[0]] for i in finger_idx)
         if h.kind == "jaw" and not jaw:
             raise InputError(self.spec.file, f"hands.{h.side}.kind",

@@ -5,8 +5,8 @@ Viewing only (not a paper section).  The plan is reloaded and the object followe
 the phases by :mod:`regrasp_cli.replay`, as the validator does: it rests at the phase's
 placement while no hand holds it, otherwise ``X_WO = X_WG(q) @ X_GO`` with X_GO fixed at
 the phase start.  Key frames come from the phases' kinds, never their names.  Between
-waypoints the robot moves on straight joint-space segments with the trapezoidal timing of
-:mod:`regrasp_cli.motion.timing`, evaluated at the plan's waypoint times.
+waypoints the robot moves as each phase's own timing says (straight segments, or blends at
+corners), evaluated by ``phase.evaluate`` at the plan's times.
 
 Times are seconds from the plan start; configurations (nq,) in the plan's joint order
 (rad or m); poses 4x4 in the robot base frame W (m).

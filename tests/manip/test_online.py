@@ -1,5 +1,5 @@
 """The online stage (Saut et al. 2010, §IV-B, §V-B, §V-C) piece by piece, on the default
-scene with small grasp lists built once per session (shared with tests/test_cli_plan.py):
+scene with small grasp lists built once per test run (shared with tests/test_cli_plan.py):
 
 * hand shapes: hand-hand and hand-environment tests, against a brute-force coal check
   without the bounding-sphere filter;
@@ -60,7 +60,7 @@ QUERIES = ("grasp", "carry", "place", "rest")  # the hand-over's transit and tra
 
 @pytest.fixture(scope="module")
 def lists(problem, cache_dir) -> dict[str, GraspList]:
-    """Both hands' grasp lists, in the session cache (the CLI tests use the same ones)."""
+    """Both hands' grasp lists, in the run's cache (the CLI tests use the same ones)."""
     options = BuildOptions(grasp=replace(GraspOptions(), target=GRASP_TARGET), seed=problem.spec.planning.seed,
                            jobs=2)
     return {h: load_or_build(SCENE_YAML, cache_dir, h, options) for h in ("right", "left")}
@@ -490,7 +490,7 @@ def test_a_one_iteration_rrt_budget_fails_in_a_query(problem, lists, monkeypatch
 
 @pytest.fixture(scope="module")
 def roadmap(problem, cache_dir) -> Roadmap:
-    """The roadmap of `plan --roadmap-nodes 12`, in the session cache (shared with the CLI tests)."""
+    """The roadmap of `plan --roadmap-nodes 12`, in the run's cache (shared with the CLI tests)."""
     from regrasp_cli.roadmap.build import RoadmapOptions
     from regrasp_cli.roadmap.build import load_or_build as load_or_build_roadmap
 

@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[2]
 ROBOT_DIR = ROOT / "configs" / "robots" / "humanoid43"
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
 
-OPTS = RoadmapOptions(nodes=10)  # shared with tests/roadmap/test_compose.py through the session cache
+OPTS = RoadmapOptions(nodes=10)  # shared with tests/roadmap/test_compose.py through the run's cache
 TREE = replace(OPTS, tree=True)
 SMALL = RoadmapOptions(nodes=8)  # the determinism builds
 

@@ -16,7 +16,8 @@ Stages (§IV-B, §V-B, §V-C), each timed, each returning what it found and its 
    by the approach, lift and retreat lines of the key configurations; finger closing and
    opening are the grasp, hand-over and release transitions.  When a query fails the next
    double grasp is tried with its own exchange, ``key_attempts`` in all;
-4. ``timing``: stop-at-every-waypoint trapezoids within the URDF velocity limits.
+4. ``timing``: :func:`solve.time_steps` within the URDF velocity limits, with blends at
+   the corners whose curve is collision-free (``blend``), else a stop at each waypoint.
 
 "Right picks, left places" and the four query names are spelled here and nowhere else.
 """
