@@ -176,13 +176,15 @@ def markdown(records: list[dict], header: list[str], offline: dict[str, dict], r
     return "\n".join(L) + "\n"
 
 
-def paper_section(records: list[dict], offline: dict[str, dict], reference: str = "roadmap") -> list[str]:
-    """The "next to the paper" tables, one per scene the reference ran on."""
+def paper_section(records: list[dict], offline: dict[str, dict], reference: str = "roadmap",
+                  heading: str = "##") -> list[str]:
+    """The "next to the paper" tables, one per scene the reference ran on, each under a
+    markdown heading of level ``heading``."""
     L = []
     for scene in ordered(r["scene"] for r in records):
         if not select(records, scene, reference):
             continue
-        L += ["", f"## Next to the paper: {scene}", "",
+        L += ["", f"{heading} Next to the paper: {scene}", "",
               "The paper's numbers are for its own scene and robot (Justin), on 2010 hardware; ours are medians "
               "over solved runs, T of a query being its planning plus its lazy path validation.", ""]
         L += _md(PAPER_COLUMNS, paper_rows(records, offline, scene, reference))
@@ -206,7 +208,7 @@ def docs_block(records: list[dict], meta: dict, reference: str = "roadmap") -> s
         L += ["", f"Per-seed ratio of planner times to {reference} (without writing and `regrasp validate`; the last "
                   "column counts failures at the time they gave up, a lower bound):", ""]
         L += _md(RATIO_COLUMNS, rr)
-    L += paper_section(records, meta.get("offline", {}), reference)
+    L += paper_section(records, meta.get("offline", {}), reference, heading="####")  # inside a suite's ###
     return "\n".join(L) + "\n"
 
 

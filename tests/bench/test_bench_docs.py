@@ -52,7 +52,7 @@ def test_the_block_is_rewritten_from_the_records(tmp_path):
     assert "3000 RRT-Connect iterations per query" in text
     assert "| desk | roadmap | 4/6 | 67 % |" in text  # aggregated again from runs.jsonl
     assert "| desk | rrt-connect | 2 | 3.50x |" in text  # planner time ratio: total / 2 in the records
-    assert "## Next to the paper: desk" in text and "| the four queries, roadmap | 11.6 s |" in text
+    assert "\n#### Next to the paper: desk" in text and "| the four queries, roadmap | 11.6 s |" in text
     assert "5.0 s (built); right 121, left 120" in text
     for part in ("summary.md", "runs.jsonl", "times.png"):
         assert (d / "bench" / f"tiny-{part}").is_file()
