@@ -33,7 +33,8 @@ HORSE = ROOT.parent / "shared" / "meshes" / "horse_1334.stl"
 def horse_scene(tmp: Path) -> Path:
     """The default scene with the horse as the object (path given absolutely)."""
     data = yaml.safe_load(SCENE.read_text())
-    data["robot"] = str((SCENE.parent / data["robot"]).resolve())
+    if not str(data["robot"]).startswith("builtin:"):
+        data["robot"] = str((SCENE.parent / data["robot"]).resolve())
     data["object"]["mesh"] = str(HORSE)
     path = tmp / "horse_scene.yaml"
     path.write_text(yaml.safe_dump(data))
@@ -46,10 +47,7 @@ def run(scene: Path, hand: str, jobs: int, repeats: int, robot_cache: Path) -> d
     times, kept, fc, frames, stages = [], [], [], [], []
     for _ in range(repeats):
         with tempfile.TemporaryDirectory() as cache:
-            from regrasp_cli.grasp import build as b
-
             fresh_cache(robot_cache, Path(cache))
-            b._context.cache_clear()
             glist, rep = build_grasps(scene, Path(cache), hand, BuildOptions(jobs=jobs))
         times.append(sum(rep.seconds.values()))
         kept.append(rep.kept)
