@@ -14,8 +14,6 @@ from filelock import FileLock
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT_YAML = ROOT / "configs" / "robots" / "humanoid43" / "robot.yaml"
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
-# the small artefacts of the end-to-end tests: 20 grasps per hand, 12 nodes per roadmap
-SMALL = ("--grasp-target", "20", "--roadmap-nodes", "12")
 
 
 def _run_root(tmp_path_factory) -> Path:
@@ -65,7 +63,7 @@ def default_plan(once, cache_dir) -> Path:
     once for every test that reads a solved plan/2; beside it, ``plan.stdout``.  Tests that
     write more plans of this scene put them in the same folder, so that the relative paths
     they record are the same."""
-    from cli_helpers import run
+    from cli_helpers import SMALL, run
 
     def make(d: Path) -> None:
         result = run("--cache-dir", cache_dir, "plan", SCENE_YAML, "-o", d / "plan.json", *SMALL, "--seed", 0)

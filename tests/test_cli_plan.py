@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cli_helpers import assert_one_error_line, copy_artefacts, needs_separate_stderr, run, scene_dict, write_scene
+from cli_helpers import (SMALL, assert_one_error_line, copy_artefacts, needs_separate_stderr, run, scene_dict,
+                         write_scene)
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
-SMALL = ("--grasp-target", "20", "--roadmap-nodes", "12")
 SEED = 0  # the scene's planning.seed
 RRT_SEED = 0  # the baseline does not solve every seed with its default budget; it solves this one
 PHASES = ("grasp", "close_right", "carry", "close_left", "open_right", "place", "open_left", "rest")

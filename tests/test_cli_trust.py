@@ -18,10 +18,9 @@ from pathlib import Path
 import h5py
 import pytest
 
-from cli_helpers import ROOT, SCENE_YAML, assert_one_error_line, copy_artefacts, needs_separate_stderr, run
+from cli_helpers import ROOT, SCENE_YAML, SMALL, assert_one_error_line, copy_artefacts, needs_separate_stderr, run
 from regrasp_cli.store import sha256_file
 
-SMALL = ("--grasp-target", "20", "--roadmap-nodes", "12")
 
 pytestmark = needs_separate_stderr
 
@@ -34,12 +33,6 @@ def plan(cache_dir: Path, out: Path, *args):
 def built(cache_dir, default_plan) -> Path:
     """The run's cache with the small artefacts (conftest.default_plan built what was missing)."""
     return Path(cache_dir)
-
-
-def _copy(built: Path, to: Path) -> Path:
-    """The finished artefacts of ``built`` (not the locks, nor another worker's temp files)."""
-    copy_artefacts(built, to)
-    return to
 
 
 def _used(cache: Path, key: str) -> Path:
@@ -82,7 +75,7 @@ def _recorded(plan_file: Path) -> dict[str, str]:
 @pytest.mark.parametrize("folder, how", [("grasps", "flipped"), ("roadmap", "flipped"), ("roadmap", "truncated"),
                                          ("grasps", "empty")])
 def test_a_damaged_artefact_is_refused_with_no_build(built, tmp_path, folder, how):
-    cache = _copy(built, tmp_path / "cache")
+    cache = copy_artefacts(built, tmp_path / "cache")
     path = _used(cache, "grasps_right" if folder == "grasps" else "roadmap")
     _damage(path, how)
     out = tmp_path / "plan.json"
@@ -92,7 +85,7 @@ def test_a_damaged_artefact_is_refused_with_no_build(built, tmp_path, folder, ho
 
 
 def test_a_damaged_grasp_list_is_rebuilt_with_a_line_saying_so(built, tmp_path):
-    cache = _copy(built, tmp_path / "cache")
+    cache = copy_artefacts(built, tmp_path / "cache")
     path = _used(cache, "grasps_right")
     before = _checksum(path)
     _damage(path, "flipped")

@@ -30,11 +30,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from cli_helpers import assert_one_error_line, needs_separate_stderr, run, scene_dict, write_scene
+from cli_helpers import SMALL, assert_one_error_line, needs_separate_stderr, run, scene_dict, write_scene
 
 pytestmark = needs_separate_stderr
 
-SMALL = ("--grasp-target", "20", "--roadmap-nodes", "12")  # the artefacts of tests/test_cli_plan.py
 # the second task: from the first one's goal (behind the lamp, left hand only) to near its start
 BACK_START = {"xyz": [0.62, 0.78, 0.74], "rpy": [0, 0, -1.5708]}
 BACK_GOAL = {"xyz": [0.45, -0.75, 0.74], "rpy": [0, 0, 1.5708]}
