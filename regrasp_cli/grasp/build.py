@@ -269,12 +269,20 @@ def _frame_order(n_positions_grid: int, n_orientations: int) -> np.ndarray:
 
 def remove_duplicates(grasps: list[Grasp], distance: float, angle: float) -> list[Grasp]:
     """Best first; a grasp is dropped when a better kept one has its hand within
-    ``distance`` (m) and ``angle`` (rad)."""
+    ``distance`` (m) and ``angle`` (rad).
+
+    The kept hands' positions are compared in one array operation, with a margin far above
+    its rounding; only those it finds near get the exact pairwise test, so the result is
+    the pairwise loop's (the search calls this after every chunk, on every grasp so far)."""
     ordered = sorted(grasps, key=lambda g: (-g.scores.total, g.frame_index))
     kept: list[Grasp] = []
+    p_kept = np.empty((len(ordered), 3))  # positions of the kept hands, in O
     for g in ordered:
-        if not any(np.linalg.norm(g.X_OG[:3, 3] - k.X_OG[:3, 3]) < distance
-                   and rotation_angle(g.X_OG[:3, :3].T @ k.X_OG[:3, :3]) < angle for k in kept):
+        p = g.X_OG[:3, 3]
+        near = np.flatnonzero(np.linalg.norm(p_kept[:len(kept)] - p, axis=1) < distance * (1 + 1e-9))
+        if not any(np.linalg.norm(p - kept[i].X_OG[:3, 3]) < distance
+                   and rotation_angle(g.X_OG[:3, :3].T @ kept[i].X_OG[:3, :3]) < angle for i in near):
+            p_kept[len(kept)] = p
             kept.append(g)
     return kept
 

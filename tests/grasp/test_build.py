@@ -9,11 +9,13 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import trimesh
 import yaml
+from scipy.spatial.transform import Rotation
 
 from cli_helpers import copy_artefacts
 
@@ -25,9 +27,10 @@ from regrasp_cli.grasp.build import (
     build_grasps,
     provenance,
     read_grasp_list,
+    remove_duplicates,
 )
 from regrasp_cli.grasp.quality import combine_scores, force_closure, primitive_wrenches
-from regrasp_cli.grasp.single import GraspOptions
+from regrasp_cli.grasp.single import Grasp, GraspOptions
 from regrasp_cli.grasp.surface import build_surface, sampling_step
 from regrasp_cli.model.collision import ObjectPlacement, collision_world
 from regrasp_cli.model.robot import Kinematics
@@ -358,3 +361,39 @@ def test_partners_share_the_object_without_the_hands_colliding(problem, glist):
         assert k not in found
         for j in range(len(glist)):
             assert (j in found) == (not hands_collide(shapes[k], glist.X_OG[k], shapes[j], glist.X_OG[j]))
+
+
+# --------------------------------------------------------------------------- near-duplicates
+
+
+def _grasp(i: int, total: float, p, yaw: float = 0.0) -> Grasp:
+    X = np.eye(4)
+    X[:3, :3] = Rotation.from_euler("z", yaw).as_matrix()
+    X[:3, 3] = p
+    scores = SimpleNamespace(total=total)
+    return Grasp(i, X, np.zeros(1), np.zeros(1, bool), np.zeros((1, 3)), np.zeros((1, 3)), scores)
+
+
+def test_near_duplicates_known_on_paper():
+    """Best first: b (5 mm, 0.1 rad from a) goes; c (5 mm, 0.3 rad) and d (2 cm) stay; e ties
+    a's score at a's pose and goes (the lower frame index wins)."""
+    a, b = _grasp(0, 1.0, [0, 0, 0]), _grasp(1, 0.9, [0.005, 0, 0], 0.1)
+    c, d, e = _grasp(2, 0.8, [0, 0.005, 0], 0.3), _grasp(3, 0.7, [0.02, 0, 0]), _grasp(4, 1.0, [0, 0, 0])
+    kept = remove_duplicates([d, c, b, e, a], 0.01, 0.2)
+    assert [g.frame_index for g in kept] == [0, 2, 3]
+
+
+def test_near_duplicates_are_the_pairwise_loops():
+    """Random hands packed in 3 cm: the same grasps, in the same order, as the plain
+    pairwise loop over the kept ones."""
+    rng = np.random.default_rng(5)
+    grasps = [_grasp(i, float(rng.integers(0, 20)), rng.uniform(-0.015, 0.015, 3), rng.uniform(-0.6, 0.6))
+              for i in range(300)]
+    ordered = sorted(grasps, key=lambda g: (-g.scores.total, g.frame_index))
+    plain: list = []
+    for g in ordered:
+        if not any(np.linalg.norm(g.X_OG[:3, 3] - k.X_OG[:3, 3]) < 0.01
+                   and rotation_angle(g.X_OG[:3, :3].T @ k.X_OG[:3, :3]) < 0.2 for k in plain):
+            plain.append(g)
+    kept = remove_duplicates(grasps, 0.01, 0.2)
+    assert 20 < len(kept) < 250 and [g.frame_index for g in kept] == [g.frame_index for g in plain]
