@@ -367,13 +367,14 @@ def read_roadmap(path: Path, expected: Provenance | None = None) -> RoadmapArtef
 def load_or_build(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: int = 2,
                   build: bool = True) -> RoadmapArtefact:
     """The cached roadmap if fresh; else a new one (or, with ``build=False``, a refusal)."""
-    from regrasp_cli.store import is_fresh
+    from regrasp_cli.store import artefact_lock, is_fresh
 
     problem = load_problem(scene, cache_dir)
     prov = provenance(problem, options)
     path = artefact_path(cache_dir, problem, options)
-    if path.is_file() and is_fresh(path, prov):
-        return read_roadmap(path, prov)
-    if not build:
-        return read_roadmap(path, prov)  # raises: missing or stale, naming what differs
-    return build_roadmap(scene, cache_dir, options, jobs)[0]
+    with artefact_lock(path, create=build):  # another process building it: wait, then read it
+        if path.is_file() and is_fresh(path, prov):
+            return read_roadmap(path, prov)
+        if not build:
+            return read_roadmap(path, prov)  # raises: missing or stale, naming what differs
+        return build_roadmap(scene, cache_dir, options, jobs)[0]
