@@ -16,6 +16,7 @@ from typing import Callable, Protocol
 from regrasp_cli.errors import EmptyGraspList, InputError, StaleArtefactError
 from regrasp_cli.grasp import build as gb
 from regrasp_cli.grasp.build import BuildOptions, GraspList
+from regrasp_cli.grasp.usable import usable_at_ends
 from regrasp_cli.roadmap.build import RoadmapArtefact, RoadmapOptions
 from regrasp_cli.scene import Problem, load_problem
 from regrasp_cli.store import artefact_lock, sha256_file
@@ -145,8 +146,9 @@ def roadmap_options(scene_spec, nodes: int, tree: bool, seed: int | None):
 def load_artefacts(scene: Path, cache_dir: Path, problem: Problem, build: bool, jobs: int, need_roadmap: bool,
                    builder: Builder | None = None, roadmap_nodes: int = RoadmapOptions.nodes,
                    grasp_target: int | None = None) -> tuple[dict[str, GraspList], RoadmapArtefact | None, dict[str, str]]:
-    """The grasp lists of both hands and the roadmap, built when missing or stale unless
-    ``build`` is False (then a missing or stale one raises an InputError naming it).
+    """The grasp lists of both hands, filtered for the scene (:func:`usable_at_ends`), and
+    the roadmap, built when missing or stale unless ``build`` is False (then a missing or
+    stale one raises an InputError naming it).
     ``builder`` builds a missing one (the CLI's shows progress); default: quietly."""
     from regrasp_cli.roadmap import build as rb
 
@@ -156,9 +158,11 @@ def load_artefacts(scene: Path, cache_dir: Path, problem: Problem, build: bool, 
     options = build_options(spec.planning.seed, None, jobs, None, None, grasp_target)
     lists, hashes = {}, {}
     for hand in ("right", "left"):
-        lists[hand], hashes[f"grasps_{hand}"] = _cached(
+        stored, hashes[f"grasps_{hand}"] = _cached(
             grasp_list_path(cache_dir, problem, hand, options), gb.provenance(problem, hand, options), build,
             lambda: builder.grasps(scene, cache_dir, hand, options), _read_grasp_list, builder)
+        # the scene's filter (seed 000 §IV-B): the best grasps usable at the start or the goal
+        lists[hand] = usable_at_ends(problem, stored, options.grasp.target)
     art = None
     if need_roadmap:
         r_opts = roadmap_options(spec, roadmap_nodes, False, None)

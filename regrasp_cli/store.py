@@ -166,11 +166,16 @@ def robot_identity(robot) -> str:
     neither overwrites the other's artefacts; the provenance inside still decides whether
     a file is fresh.  ``robot``: a loaded :class:`~regrasp_cli.model.robot.Robot` (its
     ``spec.file``, ``spec.hands`` and ``urdf_sha256`` are read)."""
-    file = Path(robot.spec.file)
-    stem = file.parent.name if file.name == "robot.yaml" and file.parent.name else file.stem
     hands = {side: repr(spec) for side, spec in sorted(robot.spec.hands.items())}  # repr: any field type
     digest = sha256_params({"urdf": robot.urdf_sha256, "hands": hands})[:8]
-    return f"{file_label(stem)}-{digest}"
+    return f"{robot_label(robot)}-{digest}"
+
+
+def robot_label(robot) -> str:
+    """A robot's readable name in artefact file names: its robot.yaml's folder (its file
+    stem when it is not called ``robot.yaml``), e.g. ``baxter``."""
+    file = Path(robot.spec.file)
+    return file_label(file.parent.name if file.name == "robot.yaml" and file.parent.name else file.stem)
 
 
 def file_label(name: str) -> str:

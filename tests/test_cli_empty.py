@@ -164,5 +164,5 @@ def test_two_robots_sharing_a_cache_keep_their_grasp_lists_apart(tmp_path, cache
     b, h = files["baxter"][0], files["humanoid43"][0]
     assert b != h and b.name.startswith("builtin_block-baxter-") and h.name.startswith("builtin_block-humanoid43-")
     assert set(artefacts(cache, "grasps")) == {b, h}  # nothing left under a name without the robot
-    assert read_provenance(b).inputs["urdf"] != read_provenance(h).inputs["urdf"]
+    assert read_provenance(b).inputs["hand"] != read_provenance(h).inputs["hand"]
     assert len(read_grasp_list(b)) > 0 and len(read_grasp_list(h)) > 0

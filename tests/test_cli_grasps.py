@@ -62,7 +62,7 @@ def test_show_prints_provenance_and_grasps(built):
     assert result.exit_code == 0, (result.output, result.exception)
     out = result.stdout
     for word in ("provenance", "regrasp.grasps v1", "software", "created", "sha256 mesh", "sha256 params",
-                 "sha256 urdf", "sha256 robot_yaml", "hand", "right", "Best", "epsilon", "total", "thumb"):
+                 "sha256 hand", "hand", "right", "Best", "epsilon", "total", "thumb"):
         assert word in out, word
     from regrasp_cli.grasp.build import read_grasp_list
 

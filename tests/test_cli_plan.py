@@ -26,7 +26,7 @@ from cli_helpers import (SMALL, assert_one_error_line, copy_artefacts, needs_sep
 ROOT = Path(__file__).resolve().parents[1]
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
 SEED = 0  # the scene's planning.seed
-RRT_SEED = 0  # the baseline does not solve every seed with its default budget; it solves this one
+RRT_SEED = 1  # the baseline does not solve every seed with its default budget; it solves this one
 PHASES = ("grasp", "close_right", "carry", "close_left", "open_right", "place", "open_left", "rest")
 # (kind, holding hands, touching, placement) of each phase: the right hand picks at the start
 # placement, hands over to the left, which places at the goal placement
@@ -206,21 +206,22 @@ def test_validate_rejects_a_jump(solved, problem):
 
 
 def test_validate_rejects_a_contact_off_the_surface(solved):
-    """The first contact of the first grasp moved 1 cm out along its normal."""
+    """The first contact of the first grasp moved 4 mm out along its normal (not farther:
+    on the statuette a point 1 cm out may come nearer another part of the surface)."""
     _, src = solved
     d0 = json.loads(src.read_text())
     contact = d0["grasps"][0]["contacts"][0]
     n = np.array(contact["normal"])
 
     def change(d):
-        d["grasps"][0]["contacts"][0]["point"] = (np.array(contact["point"]) + 0.01 * n / np.linalg.norm(n)).tolist()
+        d["grasps"][0]["contacts"][0]["point"] = (np.array(contact["point"]) + 0.004 * n / np.linalg.norm(n)).tolist()
 
     out = validate_rejects(tampered(src, "off_surface.json", change))
     g = d0["grasps"][0]
     m = re.search(rf"^grasp: grasp {g['id']} \({g['hand']} hand\): {contact['finger']} contact ([\d.]+) mm off the "
                   r"object surface", out, re.M)
     assert m, out
-    assert float(m.group(1)) == pytest.approx(10.0, abs=0.5)
+    assert float(m.group(1)) == pytest.approx(4.0, abs=0.3)
 
 
 def test_validate_rejects_a_moved_goal_placement(solved):

@@ -6,8 +6,9 @@ of the planner: the default scene's (the right hand picks the statuette at ``sta
 hands it over to the left, which puts it down behind the lamp) and the plan of a copy of
 the scene whose task starts where the first ends (the left hand picks it up again, hands
 it over to the right, which puts it down near the start).  Joined, the object goes
-``start`` -> ``middle`` -> ``goal`` with three grasps (the right hand's first, the left
-hand's, the right hand's second), the second half's times shifted and its phases renamed.
+``start`` -> ``middle`` -> ``goal`` held by the right hand, the left, the left again and the
+right (the grasps of one list, so some may repeat), the second half's times shifted and its
+phases renamed.
 The robot is at rest where the halves meet and the object at the first plan's goal, which
 is the second one's start, so the joined plan is as valid as its halves: `regrasp
 validate` must accept it, reject it when the intermediate placement is moved (the object
@@ -116,8 +117,9 @@ def test_the_joined_plan_regrasps_through_an_intermediate_placement(regrasp):
     p = read_plan(path)
     assert [pl.id for pl in p.placements] == ["start", "middle", "goal"]
     assert len({pl.X_WO.tobytes() for pl in p.placements}) == 3  # three different poses
-    # seed 0: right-8 and left-2 there, left-2 and right-4 back (the ids are the lists' indices)
-    assert len(p.grasps) >= 3 and len({g.id for g in p.grasps}) == len(p.grasps)
+    # both halves read the same grasp lists (they do not depend on the task), so a grasp of
+    # the first half may come back in the second: ids are unique, both hands hold it
+    assert len(p.grasps) >= 2 and len({g.id for g in p.grasps}) == len(p.grasps)
     assert {g.hand for g in p.grasps} == {"left", "right"}
     used = [gid for ph in p.phases for gid in ph.holding.values()]
     assert set(used) == {g.id for g in p.grasps}
@@ -126,12 +128,9 @@ def test_the_joined_plan_regrasps_through_an_intermediate_placement(regrasp):
     assert [ph.placement for ph in p.phases if ph.placement] == ["start", "start", "middle", "middle", "middle",
                                                                  "middle", "goal", "goal"]
     # carried by the right hand, then the left one down to the middle; picked up again there by
-    # the left hand, carried by the right one to the goal, with a grasp not used before the middle
+    # the left hand, carried by the right one to the goal
     holders = [next(iter(ph.holding)) for ph in p.phases if ph.kind.value == "transfer"]
     assert holders == ["right", "left", "left", "right"]
-    before = {gid for ph in p.phases[:8] for gid in ph.holding.values()}
-    after = {gid for ph in p.phases[8:] for gid in ph.holding.values()}
-    assert after - before, (before, after)
 
 
 def test_validate_accepts_the_regrasp(regrasp):
@@ -192,7 +191,7 @@ def test_show_draws_the_regrasp(regrasp, tmp_path):
     middle = np.array(next(p["pose"] for p in plan["placements"] if p["id"] == "middle"))
     for name in ("place", "pick-2"):
         dp, da = pose_error(kfs[name].X_WO, middle)
-        assert dp < 1e-4 and da < 1e-3, (name, dp, da)
+        assert dp < 2e-4 and da < 1e-3, (name, dp, da)  # IK: 0.1 mm, 1 mrad at the hand, 10 cm lever
     assert [plan["phases"][kfs[n].phase]["name"] for n in ("pick-2", "exchange-2", "place-2")] == \
         ["close_left-2", "close_right-2", "place-2"]
 

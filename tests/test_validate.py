@@ -24,7 +24,8 @@ from rich.console import Console
 
 from regrasp_cli.errors import InputError, StaleArtefactError
 from regrasp_cli.grasp.frames import grasp_frames
-from regrasp_cli.grasp.single import GraspOptions, HandModel, grasp_for_frame
+from regrasp_cli.grasp.fingertips import grasp_for_frame
+from regrasp_cli.grasp.single import GraspOptions, HandModel
 from regrasp_cli.grasp.surface import build_surface, sampling_step
 from regrasp_cli.commands.validate import print_validation
 from regrasp_cli.grasp.workspace import hand_workspace

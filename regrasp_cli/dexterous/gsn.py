@@ -5,7 +5,7 @@ A configuration (:class:`GsConfig`) is the object's pose in the hand's grasp fra
 (the wrist is fixed), one contact per finger on the object's surface, and the finger
 joints that put each fingertip sphere on its contact.  Sampling is the RLG way (§V): the
 object pose and the contacts are the free parameters and the joints follow by IK; the
-contacts come from the grasp search of :func:`grasp.single.grasp_for_frame` (per finger,
+contacts come from the grasp search of :func:`grasp.fingertips.grasp_for_frame` (per finger,
 surface points inside its workspace whose normal faces it, thumb first), so a sample is a
 grasp of our grasp lists with every finger in contact.  Collisions other than at the
 fingertips are rejected there (finger-finger, finger-object, object-palm).
@@ -39,7 +39,8 @@ from regrasp_cli.dexterous.contacts import closed, closure, holds
 from regrasp_cli.dexterous.hand import InHand, reach, tip_targets
 from regrasp_cli.dexterous.surface import Surface, along, geodesic
 from regrasp_cli.dexterous.transfer import interpolate, poses_between
-from regrasp_cli.grasp.single import GraspOptions, HandModel, grasp_for_frame
+from regrasp_cli.grasp.fingertips import grasp_for_frame
+from regrasp_cli.grasp.single import GraspOptions, HandModel
 from regrasp_cli.grasp.surface import Surface as SampledSurface
 from regrasp_cli.grasp.workspace import FingerWorkspace
 from regrasp_cli.model.collision import CollisionWorld, cold_start
@@ -75,7 +76,7 @@ class GsScratch:
 
     def __init__(self, hm: HandModel, workspaces: tuple[FingerWorkspace, ...], sampled: SampledSurface,
                  surface: Surface, rho: float, options: GsOptions = GsOptions(),
-                 grasp: GraspOptions = GraspOptions(), world: CollisionWorld | None = None):
+                 grasp: GraspOptions = GraspOptions(candidates_per_finger=6), world: CollisionWorld | None = None):
         self.hm, self.workspaces, self.sampled, self.surface = hm, workspaces, sampled, surface
         self.world = world  # the scene's obstacles with the robot and the object (W), if any
         self.X_GO = np.eye(4)  # where the object is (:meth:`place`)

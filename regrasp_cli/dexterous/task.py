@@ -266,7 +266,7 @@ def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: RoadmapOption
               "p_GO": plain(spec.X_GO_start[:3, 3]), "obstacles": [repr(x) for x in spec.obstacles],
               "learn": learning, "roadmap": roadmap, "gait": asdict(g)}
     return Provenance(ROADMAP_FORMAT, ROADMAP_VERSION, {"urdf": problem.robot.urdf_sha256,
-                                                        "robot_yaml": problem.robot.robot_yaml_sha256,
+                                                        "robot_yaml": problem.robot.spec_sha256,
                                                         "mesh": mesh_sha256(problem.object),
                                                         "params": sha256_params(params)})
 

@@ -3,16 +3,20 @@
 Pipeline (fingertip hands; jaws: :mod:`.jaw`): object surface model (:mod:`.surface`) -> finger workspace spheres
 (:mod:`.workspace`, Algorithm 1, cached) -> grasp frames (:mod:`.frames`: positions in
 the object's bounding box x an incremental SO(3) grid; then :mod:`.pinch` frames across
-antipodal pairs, tried only when the grid leaves the list short) -> one grasp attempt per frame
-(:mod:`.single`), in parallel over forked processes -> force-closure filter and quality
-(:mod:`.quality`) -> near-duplicates removed -> sorted by quality -> HDF5 artefact.
+antipodal pairs, tried only when the grid leaves the list short) -> the grasp of each frame,
+a chunk of frames at a time (:mod:`.fingertips`), chunks in parallel over forked processes
+-> force-closure filter and quality (:mod:`.quality`) -> near-duplicates removed -> sorted
+by quality -> HDF5 artefact.
 
-A grasp list depends on the robot (URDF and the whole robot.yaml), the object mesh, the
-friction coefficient, the options, and today also on the scene: it keeps only the grasps
-whose hand clears the obstacles with the object at the task's start or goal pose
-(:class:`_Usable`), so the obstacles and both poses are hashed into its parameters
-(:func:`_params`).  This departs from the paper, whose lists are context independent and
-filtered against the environment online (§IV-A, §IV-B); docs/DESIGN-NOTES.md, "The list".
+A grasp list is context independent, as in the paper (§IV-A): it depends on the hand
+alone (its robot.yaml section, the joints, frames and collision geometry of its palm and
+fingers and the link pairs never checked among them:
+:func:`~regrasp_cli.model.handshape.hand_inputs`), the object mesh, the friction
+coefficient, the contact tolerance, the build options and the seed (:func:`provenance`),
+never on a scene's obstacles or poses, the rest posture or the arms.  Which grasps a
+scene lets a hand use is decided online, where §IV-B filters the lists
+(:mod:`manip.doublegrasp`).
+
 Two grasps are near-duplicates when their hand poses differ by less than
 ``duplicate_distance`` in position and ``duplicate_angle`` in orientation; the better one
 is kept.  The result is deterministic for a given seed whatever the number of jobs.
@@ -32,21 +36,23 @@ from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.jaw import Jaw, antipodal_pairs, jaw_frames, jaw_geometry, jaw_grasp
 from regrasp_cli.grasp.pads import PadHand, pad_frames, pad_geometry, pad_grasp
 from regrasp_cli.grasp.pinch import pinch_frames
-from regrasp_cli.model.handshape import hand_hits_static, hand_shapes, single_shape, static_geometry
+from regrasp_cli.model.handshape import StaticGeometry, hand_hits_static, hand_inputs, hand_shapes
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
-from regrasp_cli.grasp.single import ContactHint, Grasp, GraspOptions, HandModel, grasp_for_frame
+from regrasp_cli.grasp.fingertips import Hints, grasps_for_frames
+from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel
 from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
 from regrasp_cli.grasp.workspace import FingerWorkspace, WorkspaceOptions, hand_workspace
 from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.parallel import ordered_map
-from regrasp_cli.scene import Problem, load_problem, obstacles_sha256
-from regrasp_cli.spatial import rotation_angle
-from regrasp_cli.store import (Provenance, canonical_json, file_label, read_artefact, robot_identity, sha256_params,
+from regrasp_cli.scene import Problem, load_problem
+from regrasp_cli.spatial import rotation_aligning, rotation_angle
+from regrasp_cli.store import (Provenance, canonical_json, file_label, read_artefact, robot_label, sha256_params,
                                write_artefact)
 
 FORMAT, FORMAT_VERSION = "regrasp.grasps", 1
 CHUNK = 256  # frames per work item; the target is checked after each
 PINCH_WIDTH = 0.12  # m: widest antipodal pair tried for a pinch frame (the fingertips' reach decides)
+PINCH_PLACEMENTS = 3  # the pinch pass levels its pairs with the supports of this many stable placements
 SCORE_NAMES = ("epsilon", "centroid", "ellipsoid", "curvature", "total")
 
 
@@ -71,9 +77,21 @@ class GraspList:
     normals: np.ndarray  # (k, n_fingers, 3) outward normals, frame O
     scores: np.ndarray  # (k, 5): epsilon, centroid, ellipsoid, curvature, total
     frame_index: np.ndarray  # (k,) index of the grasp frame each grasp came from
+    list_index: np.ndarray | None = None  # (k,) index in the stored list (a subset's rows: :meth:`rows`)
 
     def __len__(self) -> int:
         return len(self.X_OG)
+
+    def stored_index(self, k: int) -> int:
+        """The index in the stored list of row ``k``."""
+        return int(k if self.list_index is None else self.list_index[k])
+
+    def rows(self, ks: np.ndarray) -> "GraspList":
+        """The grasps ``ks`` (indices of this list), in that order."""
+        ks = np.asarray(ks, dtype=int)
+        index = ks if self.list_index is None else self.list_index[ks]
+        return GraspList(self.hand, self.finger_names, self.X_OG[ks], self.finger_q[ks], self.in_contact[ks],
+                         self.points[ks], self.normals[ks], self.scores[ks], self.frame_index[ks], index)
 
 
 @dataclass(frozen=True)
@@ -93,109 +111,123 @@ class BuildReport:
 
 
 def _params(problem: Problem, hand: str, options: BuildOptions) -> dict:
-    task = problem.spec.task
     return {"hand": hand, "friction": problem.spec.object.friction, "seed": options.seed,
             "contact_tolerance": problem.spec.planning.contact_tolerance,
-            "grasp": asdict(options.grasp), "workspace": asdict(options.workspace),
-            # the list keeps the grasps usable at the task's object poses (_Usable)
-            "usable_at": {"obstacles": obstacles_sha256(problem.spec.obstacles), "fingertips_touch": True,
-                          "poses": np.round([task.X_WO_start, task.X_WO_goal], 9).tolist()}}
-
-
-class _Usable:
-    """Is a grasp usable in the scene's task: does the hand alone, at the grasp, clear the
-    obstacles with the object at its start pose or at its goal pose (where a hand picks
-    or places it)?  Its fingertips may touch the support as they touch the object
-    (:mod:`model.collision`).  A grasp from under the object goes through its support at both, and
-    no planner can use it (the double-grasp filter, :mod:`manip.doublegrasp`, would drop
-    it): the list is filled with usable grasps instead, so its target counts what
-    matters.  Memoised per grasp frame."""
-
-    def __init__(self, problem: Problem, hand: str):
-        self.robot, self.hand = problem.robot, hand
-        self.env = static_geometry(problem.spec.obstacles)
-        self.poses = (problem.spec.task.X_WO_start, problem.spec.task.X_WO_goal)
-        self.tolerance = problem.spec.planning.contact_tolerance  # the fingertips may touch the support
-        self.memo: dict[int, bool] = {}
-
-    def __call__(self, g: Grasp) -> bool:
-        if g.frame_index not in self.memo:
-            shape = hand_shapes(self.robot, self.hand, g.finger_q, self.tolerance)[0]
-            self.memo[g.frame_index] = any(not hand_hits_static(shape, X_WO @ g.X_OG, self.env, touching=True)
-                                           for X_WO in self.poses)
-        return self.memo[g.frame_index]
+            "grasp": asdict(options.grasp), "workspace": asdict(options.workspace)}
 
 
 def provenance(problem: Problem, hand: str, options: BuildOptions) -> Provenance:
-    r = problem.robot
+    """What a list depends on: the hand (:func:`~regrasp_cli.model.handshape.hand_inputs`),
+    the object mesh and the build parameters (friction, contact tolerance, options, seed)."""
     return Provenance(FORMAT, FORMAT_VERSION, {
-        "urdf": r.urdf_sha256, "robot_yaml": r.robot_yaml_sha256, "mesh": mesh_sha256(problem.object),
-        "params": sha256_params(_params(problem, hand, options))})
+        "hand": sha256_params(hand_inputs(problem.robot, hand, problem.disabled.links())),
+        "mesh": mesh_sha256(problem.object), "params": sha256_params(_params(problem, hand, options))})
 
 
 def artefact_path(cache_dir: Path, problem: Problem, hand: str, options: BuildOptions) -> Path:
-    """``grasps/<object>-<robot identity>-<hand>-<10 hex digits of the build parameters>.h5``:
-    two robots sharing a cache never overwrite each other's lists."""
+    """``grasps/<object>-<robot>-<hand>-<10 hex digits of the hand and the build parameters>.h5``:
+    two hands that differ in anything a grasp depends on never share a file, and an edit
+    of the robot elsewhere (arms, rest posture, the other hand) keeps the name."""
     name = file_label(problem.object.name.replace("builtin:", "builtin_"))
-    key = provenance(problem, hand, options).inputs["params"][:10]
-    return Path(cache_dir) / "grasps" / f"{name}-{robot_identity(problem.robot)}-{hand}-{key}.h5"
+    inputs = provenance(problem, hand, options).inputs
+    key = sha256_params([inputs["hand"], inputs["params"]])[:10]
+    return Path(cache_dir) / "grasps" / f"{name}-{robot_label(problem.robot)}-{hand}-{key}.h5"
 
 
-def _pinch_search(context: _Search) -> _Search:
-    """The search of the pinch pass (:mod:`.pinch`): the grid's frames followed by pinch
-    frames (so frame indices stay unique), on a surface sampled twice as finely (a 14 mm
-    rim gets one row of samples at the grid's step), of which only the samples where a
-    fingertip clears the support at the start or goal pose are kept.  Half the pairs are
-    levelled with each pose's vertical."""
+def _supports(problem: Problem) -> list[tuple[np.ndarray, float]]:
+    """The support planes of the object's most stable placements (at most
+    :data:`PINCH_PLACEMENTS`), each as its outward normal n (3,) and offset d in O: the
+    support is the plane n . x = d, the object on the side n . x <= d.  An object without
+    a stable placement (a rounded bar, a ball) gets the two planes across the thinnest axis
+    of its oriented bounding box, on which it would settle.  They depend on the object alone."""
+    from regrasp_cli.placement.artefact import compute_placements
+
+    v = np.asarray(problem.object.mesh.vertices)
+    try:
+        normals = [pl.normal_O for pl in compute_placements(problem.object)[:PINCH_PLACEMENTS]]
+    except InputError:
+        box = problem.object.mesh.bounding_box_oriented
+        axis = box.primitive.transform[:3, np.argmin(box.primitive.extents)]
+        normals = [axis, -axis]
+    return [(n, float(np.max(v @ n))) for n in normals]
+
+
+class _SupportClear:
+    """Which supports of :func:`_supports` a grasp's hand clears (the hand alone at the
+    grasp, the object resting on the support; its fingertips may touch the support as they
+    touch the object, within the contact tolerance): the grasps a hand can use on any table
+    where the object lies so.  It depends on the object and the hand alone, and decides
+    when the list is long enough (:attr:`GraspOptions.support_share`).  Memoised per
+    grasp frame."""
+
+    def __init__(self, problem: Problem, hand: str, supports: list[tuple[np.ndarray, float]]):
+        import coal
+
+        self.robot, self.hand = problem.robot, hand
+        self.tolerance = problem.spec.planning.contact_tolerance
+        size = 4.0  # m: a slab far wider than any hand, under the support plane
+        self.slabs = []
+        for n, d in supports:
+            X = np.eye(4)
+            X[:3, :3] = rotation_aligning(np.array([0.0, 0.0, 1.0]), n)
+            X[:3, 3] = (d + size / 2) * n
+            self.slabs.append(StaticGeometry((coal.Box(size, size, size),), X[None], X[None, :3, 3],
+                                             np.array([size])))
+        self.memo: dict[int, np.ndarray] = {}
+
+    def __call__(self, g: Grasp) -> np.ndarray:
+        if g.frame_index not in self.memo:
+            shape = hand_shapes(self.robot, self.hand, g.finger_q, self.tolerance)[0]
+            self.memo[g.frame_index] = np.array([not hand_hits_static(shape, g.X_OG, slab, touching=True)
+                                                 for slab in self.slabs], dtype=bool).reshape(len(self.slabs))
+        return self.memo[g.frame_index]
+
+    def counts(self, grasps: list[Grasp]) -> np.ndarray:
+        """Per support, how many of ``grasps`` clear it."""
+        return np.array([self(g) for g in grasps], dtype=int).reshape(-1, len(self.slabs)).sum(axis=0)
+
+
+def _pinch_searches(context: _Search, supports: list[tuple[np.ndarray, float] | None]):
+    """The searches of the pinch passes (:mod:`.pinch`), one per entry of ``supports``,
+    each run after the previous ones' frames so that frame indices stay unique; built
+    lazily (each casts its rays when its turn comes).  Each uses a surface sampled twice as
+    finely as the grid's (a 14 mm rim gets one row of samples).  For a support (one of the
+    object's most stable placements, :func:`_supports`) only the samples where a fingertip
+    clears it are kept and the pairs are levelled with it: the pinches across a flat object
+    lying there.  ``None``: pairs anywhere on the surface.  Which grasps a scene lets a
+    hand use is decided online (:mod:`manip.doublegrasp`)."""
     problem, options = context.problem, context.options
     rng = np.random.default_rng([options.seed, 1])
     h = context.hand_model.hand
     spec, thumb, ws = h.spec, h.opposing, context.workspaces
     r_tip = min(f.tip_radius for f in spec.fingers)
-    surface = build_surface(problem.object.mesh, sampling_step(r_tip) / 2, rng)
+    fine = build_surface(problem.object.mesh, sampling_step(r_tip) / 2, rng)
     grid = context.surface  # curvature read from its samples, so that the scores of both passes compare
-    surface = replace(surface, curvature=grid.curvature[grid.tree.query(surface.points)[1]])
-    among = _tips_clear(problem, surface, r_tip)
-    pairs = []
-    for X_WO in (problem.spec.task.X_WO_start, problem.spec.task.X_WO_goal):
-        p1, n1, p2, n2 = antipodal_pairs(problem.object.mesh, surface, problem.spec.object.friction, (0.0, PINCH_WIDTH),
-                                         options.grasp.pinch_frames // 2, rng, among=among, level=X_WO[2, :3])
-        keep = _tips_clear(problem, surface, r_tip, p2, n2)  # the second fingertip clears it too
-        pairs.append((p1[keep], n1[keep], p2[keep], n2[keep]))
-    p1, n1, p2, n2 = (np.concatenate(x) for x in zip(*pairs))
-    # contacts only where a fingertip clears the support (a pinch on a flat object whose
-    # other fingers take contacts low on its rim goes through the desk), plus the rays' hits
-    surface = surface.subset(among).plus(p2, n2, grid.curvature[grid.tree.query(p2)[1]])
+    fine = replace(fine, curvature=grid.curvature[grid.tree.query(fine.points)[1]])
+    clearance = r_tip - problem.spec.planning.contact_tolerance  # tip centre above the support
     others = [f for f in range(len(ws)) if f != thumb]
-    frames, pair, finger = pinch_frames(ws[thumb], [ws[f] for f in others],
-                                        (spec.fingers[thumb].tip_radius, [spec.fingers[f].tip_radius for f in others]),
-                                        p1, n1, p2, n2, rng)
-    n = len(context.frames)
-    hints = {n + k: ContactHint(others[f], p1[j], n1[j], p2[j], n2[j]) for k, (j, f) in enumerate(zip(pair, finger))}
-    return context._replace(surface=surface, frames=np.concatenate([context.frames, frames]), hints=hints)
-
-
-def _tips_clear(problem: Problem, surface: Surface, r_tip: float, points: np.ndarray | None = None,
-                normals: np.ndarray | None = None) -> np.ndarray:
-    """Indices of the contacts (the surface samples, or ``points`` and ``normals`` (k, 3)
-    in O) where a fingertip of radius ``r_tip`` touching the object clears the obstacles
-    (up to the contact tolerance it may touch them with) at the task's start or goal pose:
-    the pinches a hand can use there (:class:`_Usable`)."""
-    import coal
-
-    p = surface.points if points is None else points
-    n = surface.normals if normals is None else normals
-    env = static_geometry(problem.spec.obstacles)
-    tip = single_shape(coal.Sphere(r_tip - problem.spec.planning.contact_tolerance))
-    task = problem.spec.task
-    clear = np.zeros(len(p), dtype=bool)
-    X = np.eye(4)
-    for X_WO in (task.X_WO_start, task.X_WO_goal):
-        c_W = (p + r_tip * n) @ X_WO[:3, :3].T + X_WO[:3, 3]
-        for k in np.flatnonzero(~clear):
-            X[:3, 3] = c_W[k]
-            clear[k] = not hand_hits_static(tip, X, env)
-    return np.flatnonzero(clear)
+    radii = (spec.fingers[thumb].tip_radius, [spec.fingers[f].tip_radius for f in others])
+    for support in supports:
+        if support is None:
+            among, level = np.arange(len(fine.points)), None
+        else:
+            n_O, d = support
+            among, level = np.flatnonzero((fine.points + r_tip * fine.normals) @ n_O <= d - clearance), -n_O
+        p1, n1, p2, n2 = antipodal_pairs(problem.object.mesh, fine, problem.spec.object.friction, (0.0, PINCH_WIDTH),
+                                         options.grasp.pinch_frames, rng, among=among, level=level)
+        if support is not None:
+            keep = (p2 + r_tip * n2) @ n_O <= d - clearance  # the second fingertip clears the support too
+            p1, n1, p2, n2 = p1[keep], n1[keep], p2[keep], n2[keep]
+        # contacts only where a fingertip clears the support (a pinch on a flat object whose
+        # other fingers take contacts low on its rim goes through it), plus the rays' hits
+        surface = fine.subset(among).plus(p2, n2, grid.curvature[grid.tree.query(p2)[1]])
+        frames, pair, finger = pinch_frames(ws[thumb], [ws[f] for f in others], radii, p1, n1, p2, n2, rng)
+        n, k = len(context.frames), len(frames)
+        nan = np.full((n, 3), np.nan)
+        hints = Hints(np.concatenate([np.full(n, -1), np.array(others)[finger] if k else np.zeros(0, int)]),
+                      *(np.concatenate([nan, x[pair]]) for x in (p1, n1, p2, n2)))
+        context = context._replace(surface=surface, frames=np.concatenate([context.frames, frames]), hints=hints)
+        yield context, np.arange(n, n + k)
 
 
 # ------------------------------------------------------------------ per-process work
@@ -211,7 +243,7 @@ class _Search(NamedTuple):
     rho: float  # m: torque scale (half the object's bounding-box diagonal)
     frames: np.ndarray  # (n, 4, 4) candidate grasp frames X_OG
     options: BuildOptions
-    hints: dict | None = None  # frame index -> ContactHint (pinch frames)
+    hints: Hints | None = None  # per frame, the contacts to try first (pinch frames)
 
 
 def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> _Search:
@@ -234,7 +266,7 @@ def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> 
                                 (geometry.width_closed, geometry.width_open), options.grasp.antipodal_samples, rng)
         return _Search(problem, surface, geometry, hm, rho, jaw_frames(geometry, pairs[0], pairs[2], rng), options)
     ws = hand_workspace(robot, hand, options.workspace, cache_dir)
-    hm.voxels(ws)  # built here, so that forked workers inherit them
+    hm.voxels(ws), hm.chains()  # built here, so that forked workers inherit them
     frames = grasp_frames(problem.object.mesh.bounds, options.grasp.n_positions, options.grasp.n_orientations)
     return _Search(problem, surface, ws, hm, rho, frames, options)
 
@@ -242,15 +274,15 @@ def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> 
 def _run_chunk(context: _Search, indices: np.ndarray):
     problem, surface, ws, hm, rho, frames, options, hints = context
     friction = problem.spec.object.friction
+    if not isinstance(ws, (Jaw, PadHand)):  # fingertip hands: the whole chunk at once
+        return grasps_for_frames(hm, ws, surface, frames[indices], indices, friction, rho, options.grasp,
+                                 None if hints is None else hints.rows(indices))
     grasps, stats = [], {}
     for i in indices:
         if isinstance(ws, Jaw):
             g, st = jaw_grasp(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
         elif isinstance(ws, PadHand):
             g, st = pad_grasp(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp)
-        else:
-            g, st = grasp_for_frame(hm, ws, surface, frames[i], int(i), friction, rho, options.grasp,
-                                    None if hints is None else hints.get(int(i)))
         for k, v in st.items():
             stats[k] = stats.get(k, 0) + v
         if g is not None:
@@ -301,7 +333,6 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     n = len(frames)
     t1 = time.perf_counter()
     results, kept, done = [], [], 0
-    usable = _Usable(problem, hand)
     # Frames go in fixed chunks, orientation-major (every position for the first
     # orientations of the incremental SO(3) grid, then the next ones), and the results are
     # consumed in order: stopping at the target after a chunk boundary leaves a well-spread
@@ -311,31 +342,54 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     jaw = isinstance(context.workspaces, (Jaw, PadHand))  # their frames come in random order already
     order = np.arange(n) if jaw else _frame_order(n // options.grasp.n_orientations, options.grasp.n_orientations)
 
-    def search(context: _Search, order: np.ndarray, total: int) -> bool:
-        """Run the frames of ``order``; True once the target is reached."""
+    supports = _supports(problem)
+    clear = _SupportClear(problem, hand, supports)
+    g_opts = options.grasp
+    per_support = int(np.ceil(g_opts.support_share * g_opts.target))
+
+    def enough(kept: list[Grasp]) -> bool:
+        """The target reached: enough distinct grasps, and enough clear of each support."""
+        return bool(g_opts.target) and len(kept) >= g_opts.target and bool(np.all(clear.counts(kept) >= per_support))
+
+    def search(context: _Search, order: np.ndarray, stop) -> bool:
+        """Run the frames of ``order`` until ``stop(kept)``; True once the target is reached."""
         nonlocal kept, done
         chunks = [order[i:i + CHUNK] for i in range(0, len(order), CHUNK)]
+        total = done + len(order)
         outputs = ordered_map(_run_chunk, chunks, options.jobs, context)
         try:
             for chunk, out in zip(chunks, outputs):
                 results.append(out)
                 done += len(chunk)
-                kept = [g for g in remove_duplicates([g for gs, _ in results for g in gs],
-                                                     options.grasp.duplicate_distance, options.grasp.duplicate_angle)
-                        if usable(g)]
+                kept = remove_duplicates([g for gs, _ in results for g in gs], g_opts.duplicate_distance,
+                                         g_opts.duplicate_angle)
                 if progress:
                     progress(done, total, len(kept))
-                if options.grasp.target and len(kept) >= options.grasp.target:
-                    return True
-            return False
+                if stop(kept):
+                    break
         finally:
             outputs.close()  # stops the workers still busy with chunks we do not need
+        return enough(kept)
 
-    done_grid = None
-    if not search(context, order, n) and not jaw and options.grasp.pinch_frames:
-        done_grid = done
-        pinch = _pinch_search(context)  # the grid left the list short: pinch frames (.pinch)
-        search(pinch, np.arange(n, len(pinch.frames)), len(pinch.frames))
+    pinch_done = 0
+    if jaw or not g_opts.pinch_frames:
+        search(context, order, enough)
+    else:
+        # contacts first: pinch frames on each support of the object's stable placements
+        # until enough grasps clear it, then anywhere on it; the grid of §IV-A-1 last
+        passes = _pinch_searches(context, [*supports, None])
+        stops = [lambda kept, i=i: enough(kept) or clear.counts(kept)[i] >= per_support
+                 for i in range(len(supports))] + [enough]
+        for (pinch, pinch_order), stop in zip(passes, stops):
+            if stop(kept):
+                continue
+            before = done
+            reached = search(pinch, pinch_order, stop)
+            pinch_done += done - before
+            if reached:
+                break
+        else:
+            search(context, order, enough)
     t_frames = time.perf_counter() - t1
 
     t2 = time.perf_counter()
@@ -351,7 +405,7 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     t_write = time.perf_counter() - t2
 
     tested = len(grasps) + stats.get("not_force_closure", 0)
-    report = BuildReport(hand, path, done, stats.get("palm", 0), 0 if done_grid is None else done - done_grid,
+    report = BuildReport(hand, path, done, stats.get("palm", 0), pinch_done,
                          tested + stats.get("hand_collision", 0),
                          len(grasps), len(kept),
                          {"surface + workspace + frames": t_prep, "grasp search (frames)": t_frames,

@@ -52,32 +52,40 @@ def pinch_frames(thumb: FingerWorkspace, fingers: list[FingerWorkspace], radii: 
     mismatch of their distances, split evenly; the hand turned about the pair's axis by
     evenly spaced angles from a random one.  ``radii`` = (thumb tip radius, finger tip
     radii).  Also returns, per frame, the index of its pair and of its finger (in
-    ``fingers``): the contacts the search tries first (:func:`.single.grasp_for_frame`)."""
+    ``fingers``): the contacts the search tries first (:func:`.fingertips.grasps_for_frames`)."""
     r_thumb, r_fingers = radii
-    pairs = [tip_pairs(thumb, f, rng) for f in fingers]
+    k = len(p1)
+    f_of = np.arange(k) % max(len(fingers), 1)  # the fingers taken in turn
     frames, which, finger = [], [], []
-    for j in range(len(p1)):
-        f = j % len(fingers)
-        a, b = pairs[f]
-        if not len(a):
+    for f, ws in enumerate(fingers):
+        a, b = tip_pairs(thumb, ws, rng)
+        j = np.flatnonzero(f_of == f)
+        if not len(a) or not len(j):
             continue
+        spans = np.linalg.norm(b - a, axis=1)
+        order = np.argsort(spans, kind="stable")  # sorted by span, for a binary search per target
+        a, b, spans = a[order], b[order], spans[order]
         c1, c2 = p1[j] + r_thumb * n1[j], p2[j] + r_fingers[f] * n2[j]
-        span = np.linalg.norm(c2 - c1)
-        miss = np.abs(np.linalg.norm(b - a, axis=1) - span)
-        near = np.flatnonzero(miss < 0.003)
-        if not len(near):
-            continue
-        m = int(rng.choice(near))
-        u_G = (b[m] - a[m]) / np.linalg.norm(b[m] - a[m])
-        u_O = (c2 - c1) / span
-        roll = rng.uniform(0, 2 * np.pi) + np.arange(rolls) * 2 * np.pi / rolls
-        R = Rotation.from_rotvec(roll[:, None] * u_O).as_matrix() @ rotation_aligning(u_G, u_O)
-        X = np.tile(np.eye(4), (rolls, 1, 1))
+        span = np.linalg.norm(c2 - c1, axis=1)
+        lo, hi = np.searchsorted(spans, span - 0.003), np.searchsorted(spans, span + 0.003)
+        ok = (hi > lo) & (span > 1e-9)
+        j, c1, c2, span, lo, hi = j[ok], c1[ok], c2[ok], span[ok], lo[ok], hi[ok]
+        m = lo + np.minimum((rng.random(len(j)) * (hi - lo)).astype(int), hi - lo - 1)  # a tip pair at random
+        u_G = (b[m] - a[m]) / np.linalg.norm(b[m] - a[m], axis=1, keepdims=True)
+        u_O = (c2 - c1) / span[:, None]
+        roll = rng.uniform(0, 2 * np.pi, len(j))[:, None] + np.arange(rolls) * 2 * np.pi / rolls  # (m, rolls)
+        R = Rotation.from_rotvec((roll[..., None] * u_O[:, None]).reshape(-1, 3)).as_matrix() \
+            @ np.repeat(rotation_aligning(u_G, u_O).reshape(-1, 3, 3), rolls, axis=0)
+        X = np.tile(np.eye(4), (len(R), 1, 1))
         X[:, :3, :3] = R
-        X[:, :3, 3] = (c1 + c2) / 2 - R @ ((a[m] + b[m]) / 2)
+        mid_G = np.repeat((a[m] + b[m]) / 2, rolls, axis=0)
+        X[:, :3, 3] = np.repeat((c1 + c2) / 2, rolls, axis=0) - np.einsum("nij,nj->ni", R, mid_G)
         frames.append(X)
-        which.append(np.full(rolls, j))
-        finger.append(np.full(rolls, f))
+        which.append(np.repeat(j, rolls))
+        finger.append(np.full(len(X), f))
     if not frames:
         return np.zeros((0, 4, 4)), np.zeros(0, np.intp), np.zeros(0, np.intp)
-    return np.concatenate(frames), np.concatenate(which), np.concatenate(finger)
+    # in the order of the pairs, each pair's rolls together
+    which, finger, frames = np.concatenate(which), np.concatenate(finger), np.concatenate(frames)
+    order = np.argsort(which, kind="stable")
+    return frames[order], which[order], finger[order]

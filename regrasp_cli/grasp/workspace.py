@@ -11,7 +11,8 @@ spheres come out biggest first, i.e. farthest from the joint limits first, which
 order in which contacts are searched.
 
 The interior samples are kept with their joint values: the nearest one seeds finger IK.
-Computed once per hand model and cached (HDF5, keyed by the URDF, robot.yaml and options).
+Computed once per hand and cached (HDF5, keyed by the hand's own inputs,
+:func:`~regrasp_cli.model.handshape.hand_inputs`, and the options).
 """
 
 from __future__ import annotations
@@ -28,7 +29,8 @@ from scipy.spatial import cKDTree
 from regrasp_cli.model.collision import cold_start
 from regrasp_cli.model.robot import Kinematics, Robot
 from regrasp_cli.spatial import inverse
-from regrasp_cli.store import Provenance, is_fresh, read_artefact, robot_identity, sha256_params, write_artefact
+from regrasp_cli.model.handshape import hand_inputs
+from regrasp_cli.store import Provenance, is_fresh, read_artefact, robot_label, sha256_params, write_artefact
 
 FORMAT, FORMAT_VERSION = "regrasp.workspace", 5  # 5: redundant fingers fix their trailing joints when the leading leave a plane
 
@@ -87,12 +89,68 @@ class SphereVoxels:
         return out
 
 
+@dataclass(frozen=True)
+class HandVoxels:
+    """The voxel maps of all fingers of a hand on one lattice: per voxel, bit f set when
+    finger f's map holds it (exactly as the fingers' own maps: :func:`sphere_voxels` puts
+    them on the same lattice), and finger f's interior sample nearest to the voxel's
+    centre (-1 off its map).  One lookup answers for every finger."""
+
+    origin: np.ndarray  # (3,) centre of voxel (0, 0, 0), frame G
+    resolution: float  # m
+    bits: np.ndarray  # (nx, ny, nz) uint32
+    nearest: np.ndarray  # (n_fingers, nx, ny, nz) int32
+
+    def _flat(self, p_G: np.ndarray) -> np.ndarray:
+        """Flat index into the maps' one-voxel border of each point (n, 3) in G: points
+        off the map land on the border, which holds no finger."""
+        shape = np.array(self.bits.shape)
+        ijk = np.rint((p_G - self.origin) / self.resolution).astype(np.intp)
+        np.clip(ijk, 0, shape - 1, out=ijk)
+        return (ijk[:, 0] * shape[1] + ijk[:, 1]) * shape[2] + ijk[:, 2]
+
+    def lookup(self, p_G: np.ndarray) -> np.ndarray:
+        """The finger bits of the voxel of each point (n, 3) in G, 0 off the map (n,)."""
+        return self.bits.ravel()[self._flat(p_G)]
+
+    def nearest_sample(self, finger: int, ws: FingerWorkspace, p_G: np.ndarray) -> np.ndarray:
+        """Index of a finger's interior sample near each point (n, 3) in G: the one nearest
+        to its voxel's centre (within half a voxel diagonal of the point's own nearest),
+        the kd-tree's answer off the finger's map (n,)."""
+        out = self.nearest[finger].ravel()[self._flat(p_G)].astype(np.intp)
+        off = out < 0
+        if off.any():
+            out[off] = ws.tree.query(p_G[off])[1]
+        return out
+
+
+def hand_voxels(fingers: tuple[SphereVoxels, ...], workspaces: tuple[FingerWorkspace, ...]) -> HandVoxels:
+    """The fingers' maps (on one lattice, of one resolution) as one map of finger bits,
+    with each finger's nearest interior sample per voxel of its map, and a border of one
+    empty voxel all round."""
+    res = fingers[0].resolution
+    lo = np.rint(np.min([v.origin for v in fingers], axis=0) / res).astype(int) - 1
+    hi = np.rint(np.max([v.origin / res + v.index.shape for v in fingers], axis=0)).astype(int) + 1
+    bits = np.zeros(tuple(hi - lo), dtype=np.uint32)
+    nearest = np.full((len(fingers), *bits.shape), -1, dtype=np.int32)
+    for f, (v, ws) in enumerate(zip(fingers, workspaces)):
+        a = np.rint(v.origin / res).astype(int) - lo
+        b = a + v.index.shape
+        bits[a[0]:b[0], a[1]:b[1], a[2]:b[2]] |= (v.index >= 0).astype(np.uint32) << f
+        ijk = np.argwhere(v.index >= 0)
+        if len(ijk) and len(ws.samples):
+            block = nearest[f, a[0]:b[0], a[1]:b[1], a[2]:b[2]]
+            block[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = ws.tree.query(v.origin + res * ijk)[1]
+    return HandVoxels(lo * res, res, bits, nearest)
+
+
 def sphere_voxels(ws: "FingerWorkspace", inflate: float, resolution: float = 0.002) -> SphereVoxels:
     """The voxel map of ``ws``'s spheres grown by ``inflate`` (m)."""
     if len(ws.radii) == 0:
         return SphereVoxels(np.zeros(3), resolution, -np.ones((1, 1, 1), dtype=np.int16))
     r = ws.radii + inflate
     lo, hi = (ws.centres - r[:, None]).min(axis=0), (ws.centres + r[:, None]).max(axis=0)
+    lo = np.floor(lo / resolution) * resolution  # on one lattice for every finger (HandVoxels)
     shape = np.ceil((hi - lo) / resolution).astype(int) + 1
     axes = [lo[d] + resolution * np.arange(shape[d]) for d in range(3)]
     index = np.full(tuple(shape), -1, dtype=np.int16)
@@ -316,12 +374,12 @@ def finger_workspace(robot: Robot, hand: str, finger: int, options: WorkspaceOpt
 def hand_workspace(robot: Robot, hand: str, options: WorkspaceOptions = WorkspaceOptions(),
                    cache_dir: Path | None = None) -> tuple[FingerWorkspace, ...]:
     """Workspaces of every finger of a hand, cached under ``cache_dir/workspace/``."""
-    inputs = {"urdf": robot.urdf_sha256, "robot_yaml": robot.robot_yaml_sha256,
+    inputs = {"hand": sha256_params(hand_inputs(robot, hand, set())),  # the hand alone, not the rest posture
               "params": sha256_params({"hand": hand, **asdict(options)})}
     expected = Provenance(FORMAT, FORMAT_VERSION, inputs)
-    # the robot in the name, as for every artefact: two robots' right hands in one cache
-    # would otherwise overwrite each other's file (the provenance refusing the other's)
-    name = f"{robot_identity(robot)}-{hand}-{inputs['params'][:12]}.h5"
+    # the hand's digest in the name: two robots' right hands in one cache would otherwise
+    # overwrite each other's file (the provenance refusing the other's)
+    name = f"{robot_label(robot)}-{hand}-{sha256_params(inputs)[:12]}.h5"
     path = None if cache_dir is None else Path(cache_dir) / "workspace" / name
     if path is not None and path.is_file() and is_fresh(path, expected):
         a = read_artefact(path, expected)

@@ -39,12 +39,13 @@ def export_object(problem: Problem, cache_dir: Path) -> Path:
 
 
 def plan_grasp(lists: dict[str, GraspList], gid: str, hand: str, k: int, robot) -> PlanGrasp:
-    """Grasp ``k`` of ``hand``'s cached list, as the plan records it under id ``gid``."""
+    """Grasp ``k`` of ``hand``'s list, as the plan records it under id ``gid`` (with its
+    index in the cached list)."""
     g, h = lists[hand], robot.hands[hand]
     contacts = tuple({"finger": g.finger_names[f], "point": g.points[k, f], "normal": g.normals[k, f]}
                      for f in range(len(g.finger_names)) if g.in_contact[k, f])
     return PlanGrasp(gid, hand, g.X_OG[k], tuple(robot.joint_names[i] for i in h.idx), g.finger_q[k], contacts,
-                     float(g.scores[k, 4]), k)
+                     float(g.scores[k, 4]), g.stored_index(k))
 
 
 def _phase(m) -> Phase:

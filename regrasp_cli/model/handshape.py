@@ -53,6 +53,56 @@ def palm_and_finger_links(robot: Robot, hand: str) -> set[str]:
             if go.parentJoint in joints}
 
 
+def hand_inputs(robot: Robot, hand: str, disabled_links: set[tuple[str, str]]) -> dict:
+    """Everything of the robot that a hand's grasps depend on, as JSON-able values to hash:
+    its robot.yaml section, the joints of its palm and fingers (placements, axes, limits,
+    mimic couplings), its grasp and tip frames, the collision geometry of its links (shape
+    parameters, or the mesh file's digest and scale) and the link pairs never checked among
+    them.  Not the rest of the robot (arms, rest posture, other hand), so that an edit
+    there keeps the hand's grasp lists and finger workspaces."""
+    import hashlib
+
+    h, model = robot.hands[hand], robot.model
+    palm = model.frames[h.grasp_frame].parentJoint
+    joints = sorted({model.getJointId(robot.joint_names[i]) for i in h.idx})
+    rnd = lambda X: np.round(np.asarray(X, dtype=float), 12).tolist()  # noqa: E731
+
+    def joint(j: int) -> dict:
+        jm, i = model.joints[j], j - 1
+        jd = jm.createData()
+        jm.calc(jd, np.array([1.0, 0.0]) if jm.nq == 2 else np.zeros(1))
+        return {"name": model.names[j], "parent": model.names[model.parents[j]], "type": jm.shortname(),
+                "placement": rnd(model.jointPlacements[j].homogeneous), "axis": rnd(np.asarray(jd.S).ravel()),
+                "limits": rnd([robot.lower[i], robot.upper[i]]), "mimic": list(robot.mimic.get(i, ()))}
+
+    def frame(f: int) -> dict:
+        fr = model.frames[f]
+        return {"name": fr.name, "joint": model.names[fr.parentJoint], "placement": rnd(fr.placement.homogeneous)}
+
+    def geometry(go) -> dict:
+        g = go.geometry
+        key = {"name": go.name, "frame": model.frames[go.parentFrame].name, "joint": model.names[go.parentJoint],
+               "placement": rnd(go.placement.homogeneous), "type": type(g).__name__}
+        for attr in ("halfSide", "radius", "halfLength"):
+            if hasattr(g, attr):
+                key[attr] = rnd(getattr(g, attr))
+        if go.meshPath:
+            try:
+                key["mesh"] = hashlib.sha256(open(go.meshPath, "rb").read()).hexdigest()
+            except OSError:
+                key["mesh"] = go.meshPath
+            key["scale"] = rnd(go.meshScale)
+        return key
+
+    links = palm_and_finger_links(robot, hand)
+    return {"spec": repr(robot.spec.hands[hand]), "palm": model.names[palm], "joints": [joint(j) for j in joints],
+            "frames": [frame(h.grasp_frame), *map(frame, h.tip_frames)],
+            "geometry": [geometry(go) for go in robot.collision_model.geometryObjects
+                         if go.parentJoint == palm or go.parentJoint in joints],
+            "convex_hulls": robot.spec.convex_hulls,
+            "disabled": sorted(sorted(p) for p in disabled_links if set(p) <= links)}
+
+
 def hand_shapes(robot: Robot, hand: str, finger_values: np.ndarray, contact_tolerance: float = 0.0) -> list[HandShape]:
     """The hand's geometries posed in G, for each row of finger values (k, n_hand_joints);
     their fingertips shrunk by ``contact_tolerance`` (m) for checks of a hand that touches."""

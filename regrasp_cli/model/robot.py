@@ -30,7 +30,7 @@ import trimesh
 from regrasp_cli.config import HandSpec, RobotSpec, load_robot_spec
 from regrasp_cli.errors import InputError
 from regrasp_cli.spatial import pose_matrix
-from regrasp_cli.store import sha256_file
+from regrasp_cli.store import sha256_file, sha256_params
 
 GROUP_NAMES = ("torso", "right_arm", "left_arm")
 
@@ -274,6 +274,15 @@ class Robot:
     @cached_property
     def robot_yaml_sha256(self) -> str:
         return sha256_file(self.spec.file)
+
+    @cached_property
+    def spec_sha256(self) -> str:
+        """What the robot.yaml says, parsed: its comments, layout and file name left out,
+        so that artefacts of the whole robot (roadmaps) survive a reformatted file."""
+        from dataclasses import fields
+
+        return sha256_params({f.name: repr(getattr(self.spec, f.name)) for f in fields(self.spec)
+                              if f.name not in ("file", "urdf", "package_dirs", "srdf")})
 
     def link_of_geometry(self, gid: int) -> str:
         """Name of the URDF link a collision geometry belongs to."""

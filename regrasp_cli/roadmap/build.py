@@ -85,7 +85,7 @@ class BuildReport:
 def provenance(problem: Problem, options: RoadmapOptions) -> Provenance:
     r = problem.robot
     return Provenance(FORMAT, FORMAT_VERSION, {
-        "urdf": r.urdf_sha256, "robot_yaml": r.robot_yaml_sha256,
+        "urdf": r.urdf_sha256, "robot_yaml": r.spec_sha256,
         "obstacles": obstacles_sha256(problem.spec.obstacles), "params": sha256_params(asdict(options))})
 
 

@@ -12,9 +12,9 @@ import yaml
 
 from cli_helpers import SCENE_YAML, run
 
-# two seeds the tiny artefacts solve (seed 1 does not since the queries keep 5 mm of
-# clearance: its place query finds no certified path through a 12-node roadmap)
-SEEDS = (0, 2)
+# two seeds the tiny artefacts solve (seed 2 does not: with 20 grasps per end, its one
+# double grasp has no reachable exchange pose)
+SEEDS = (0, 1)
 
 
 def suite(folder: Path, **fields) -> Path:

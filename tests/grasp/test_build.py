@@ -319,34 +319,6 @@ def test_other_options_are_refused(problem, built):
         read_grasp_list(built[1].path, provenance(problem, HAND, other))
 
 
-def test_every_stored_grasp_is_usable_at_the_start_or_the_goal(problem, glist):
-    """The list keeps the grasps a hand can use in the scene's task: with the object at its
-    start or goal pose on the desk, the hand at the grasp touches no obstacle but with its
-    fingertips, within the contact tolerance (a grasp from under the statuette goes through
-    the desk at both and is not stored)."""
-    from regrasp_cli.model.handshape import hand_hits_static, hand_shapes, static_geometry
-
-    env = static_geometry(problem.spec.obstacles)
-    task = problem.spec.task
-    shapes = hand_shapes(problem.robot, HAND, glist.finger_q, problem.spec.planning.contact_tolerance)
-    for k, shape in enumerate(shapes):
-        assert any(not hand_hits_static(shape, X_WO @ glist.X_OG[k], env, touching=True)
-                   for X_WO in (task.X_WO_start, task.X_WO_goal)), k
-
-
-def test_the_list_depends_on_the_task_poses(problem, cache_dir, tmp_path):
-    """Another goal pose is another list (its name and provenance), not a reused one."""
-    data = yaml.safe_load(SCENE_YAML.read_text())
-    data["robot"] = str(ROBOT_YAML)
-    data["object"]["mesh"] = "builtin:statuette"
-    data["task"]["object_goal"]["xyz"][0] += 0.05
-    other = tmp_path / "scene.yaml"
-    other.write_text(yaml.safe_dump(data))
-    moved = load_problem(other, cache_dir)
-    assert artefact_path(cache_dir, moved, HAND, OPTIONS) != artefact_path(cache_dir, problem, HAND, OPTIONS)
-    assert provenance(moved, HAND, OPTIONS).inputs["params"] != provenance(problem, HAND, OPTIONS).inputs["params"]
-
-
 def test_partners_share_the_object_without_the_hands_colliding(problem, glist):
     """manip.doublegrasp.partners: the other hand's grasps that can hold the object
     together with a given one; a grasp never partners with itself (two hands in one place)."""

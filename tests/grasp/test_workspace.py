@@ -16,7 +16,7 @@ from regrasp_cli.grasp import workspace as ws_mod
 from regrasp_cli.grasp.workspace import WorkspaceOptions, fit_spheres, hand_workspace, tip_positions
 from regrasp_cli.model.ik import IKOptions, solve_position
 from regrasp_cli.model.robot import Kinematics, load_robot
-from regrasp_cli.store import robot_identity
+from regrasp_cli.store import robot_label
 
 HAND = "right"
 OPTIONS = WorkspaceOptions()
@@ -162,7 +162,7 @@ def test_fit_spheres_limits():
 
 def test_hand_workspace_is_cached_in_hdf5(robot, fingers, ws_cache, monkeypatch):
     files = sorted((ws_cache / "workspace").glob("*.h5"))
-    assert len(files) == 1 and files[0].name.startswith(f"{robot_identity(robot)}-{HAND}-")
+    assert len(files) == 1 and files[0].name.startswith(f"{robot_label(robot)}-{HAND}-")
 
     def boom(*args, **kwargs):
         raise AssertionError("finger_workspace recomputed despite a fresh cache")
@@ -199,8 +199,8 @@ def test_two_robots_right_hands_keep_their_own_files(robot, fingers, ws_cache, m
     hand4 = load_robot(Path(str(files("regrasp_cli") / "data/robots/hand4/robot.yaml")))
     hand_workspace(hand4, HAND, OPTIONS, ws_cache)
     names = sorted(f.name for f in (ws_cache / "workspace").glob("*.h5"))
-    assert len([n for n in names if n.startswith(f"{robot_identity(hand4)}-{HAND}-")]) == 1
-    assert len([n for n in names if n.startswith(f"{robot_identity(robot)}-{HAND}-")]) == 1
+    assert len([n for n in names if n.startswith(f"{robot_label(hand4)}-{HAND}-")]) == 1
+    assert len([n for n in names if n.startswith(f"{robot_label(robot)}-{HAND}-")]) == 1
 
     def boom(*args, **kwargs):
         raise AssertionError("the default robot's workspace was overwritten")

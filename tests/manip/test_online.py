@@ -274,7 +274,7 @@ def test_backed_off_preshape_moves_each_tip_straight_out_of_its_contact(problem,
     robot, h, g = problem.robot, problem.robot.hands["right"], lists["right"]
     kin = Kinematics(robot)
     backed = 0
-    for k in range(6):
+    for k in range(12):
         f = _backed_off(scratch, g, k, distance)
         if f is None:
             continue
@@ -288,7 +288,7 @@ def test_backed_off_preshape_moves_each_tip_straight_out_of_its_contact(problem,
             else:
                 at = [list(h.idx).index(j) for j in h.finger_idx[i]]
                 np.testing.assert_array_equal(f[at], g.finger_q[k][at])
-    assert backed >= 3  # most grasps can back off
+    assert backed >= 4, backed  # many grasps can back off
 
 
 def test_approach_starts_open_and_ends_preshaped_at_the_grasp_pose(problem, lists, single):
@@ -712,8 +712,8 @@ def test_a_failed_query_is_retried_with_the_next_double_grasp(problem, lists, ro
         assert streams[a] == {q: [0, i, a] for i, q in enumerate(QUERIES)}
     # the plan holds the last attempt's double grasp, not the first's
     g, t = seen[-1].giver.hand, seen[-1].taker.hand
-    expected = ((grasp_id(g, seen[-1].giver.grasp), g, seen[-1].giver.grasp),
-                (grasp_id(t, seen[-1].taker.grasp), t, seen[-1].taker.grasp))
+    expected = ((grasp_id(lists, g, seen[-1].giver.grasp), g, seen[-1].giver.grasp),
+                (grasp_id(lists, t, seen[-1].taker.grasp), t, seen[-1].taker.grasp))
     assert out.grasps == expected
     assert (seen[0].giver.grasp, seen[0].taker.grasp) != (seen[-1].giver.grasp, seen[-1].taker.grasp)
     assert {m.transition.label: dict(m.transition.holding) for m in out.phases}["carry"] == {g: expected[0][0]}

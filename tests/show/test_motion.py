@@ -54,7 +54,9 @@ def test_the_object_is_at_its_placement_or_grasp_pose_in_the_key_frames(view, na
     kf = next(k for k in key_frames(view) if k.name == name)
     expected = exchange_pose(view, kf) if pose == "exchange" else view.plan.placement(pose).X_WO
     dp, da = pose_error(kf.X_WO, expected)
-    assert dp < 1e-4 and da < 1e-3, (name, dp, da)  # the plan's IK is good to a few micrometres
+    # the plan's arm IK: 0.1 mm and 1 mrad at the hand (model.ik), the object's origin within
+    # 10 cm of the grasp frame, so within 0.2 mm and 1 mrad of where it should be
+    assert dp < 2e-4 and da < 1e-3, (name, dp, da)
 
 
 def test_the_drawn_object_is_the_mesh_at_the_exchange_pose(view):

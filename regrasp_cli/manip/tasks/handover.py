@@ -53,9 +53,10 @@ EXCHANGE_CLEARANCE = 0.02  # m: the object at the exchange pose keeps this from 
 EXCHANGE_YAWS = np.radians([0, 0, 45, -45, 0, 90, -90, 0, 135, -135, 0, 180])  # turns of the samples, in turn
 
 
-def grasp_id(hand: str, k: int) -> str:
-    """The plan's id of grasp ``k`` of ``hand``'s cached list."""
-    return f"{hand}-{k}"
+def grasp_id(lists: dict[str, GraspList], hand: str, k: int) -> str:
+    """The plan's id of grasp ``k`` of ``hand``'s list: the hand and its index in the
+    cached list (``lists`` may hold a scene's subset of it, :mod:`grasp.usable`)."""
+    return f"{hand}-{lists[hand].stored_index(k)}"
 
 
 def mode_path(g: str, t: str, gid_g: str, gid_t: str) -> list[Transition]:
@@ -308,7 +309,7 @@ def steps_of(scratch: Scratch, dg: DoubleGrasp, ex: ExchangeConfig,
               (ex.approach[-1:], ex.q_both[None]), (ex.q_both[None], ex.q_release[None]),
               (ex.retreat, "place", st.lift[::-1]), (st.q_closed[None], st.approach[-1:]),
               (st.approach[::-1], "rest")]
-    path = mode_path(g, t, grasp_id(g, sg.grasp), grasp_id(t, st.grasp))
+    path = mode_path(g, t, grasp_id(lists, g, sg.grasp), grasp_id(lists, t, st.grasp))
     return ([Step(tr, p) for tr, p in zip(path, pieces)],
             [Query(name, *queries[name]) for name in RUN_ORDER])
 
@@ -448,6 +449,6 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         return Outcome(TASK, placements=placements, stages=clock, transitions=table, counts=counts, failure=exc)
     counts["waypoints"] = int(sum(len(p.waypoints) for p in phases))
     counts["checks"] = _checks(scratch, counts)
-    grasps = ((grasp_id(g, dg.giver.grasp), g, dg.giver.grasp), (grasp_id(OTHER[g], dg.taker.grasp), OTHER[g],
-                                                                  dg.taker.grasp))
+    grasps = ((grasp_id(lists, g, dg.giver.grasp), g, dg.giver.grasp),
+              (grasp_id(lists, OTHER[g], dg.taker.grasp), OTHER[g], dg.taker.grasp))
     return Outcome(TASK, phases, grasps, placements, clock, table, counts)

@@ -454,7 +454,7 @@ def steps_of(g: _Graph, path: list[Edge], labels: list[str]) -> list[Step]:
     steps = []
 
     def held(n: Node) -> Mode:
-        return Mode.held(**{n.hand: grasp_id(n.hand, n.grasp)})
+        return Mode.held(**{n.hand: grasp_id(g.lists, n.hand, n.grasp)})
 
     def release(n: Node) -> None:
         c = g.configs[n]
@@ -483,7 +483,7 @@ def steps_of(g: _Graph, path: list[Edge], labels: list[str]) -> list[Step]:
         elif e.kind == EdgeKind.HANDOVER:
             ex = g.exchanges[e]
             a, b = e.a.hand, e.b.hand
-            both = Mode.held(**{a: grasp_id(a, e.a.grasp), b: grasp_id(b, e.b.grasp)})
+            both = Mode.held(**{a: grasp_id(g.lists, a, e.a.grasp), b: grasp_id(g.lists, b, e.b.grasp)})
             steps += [Step(Transition(Kind.TRANSFER, held(e.a), held(e.a), label + ":carry"),
                            (ca.lift, label + ":carry", ex.approach)),
                       Step(Transition(Kind.HANDOVER, held(e.a), both, f"close_{b}", (b,)),
@@ -667,7 +667,7 @@ def _graph_plan(g: _Graph, stable: list[StablePlacement], style) -> Outcome:
         return Outcome(TASK, placements=dict(g.placements), stages=clock, transitions=g.table, counts=counts,
                        failure=exc)
     used = [n for e in path for n in (e.a, e.b) if n is not None]
-    grasps = tuple(dict.fromkeys((grasp_id(n.hand, n.grasp), n.hand, n.grasp) for n in used))
+    grasps = tuple(dict.fromkeys((grasp_id(g.lists, n.hand, n.grasp), n.hand, n.grasp) for n in used))
     counts = dict(g.counts, style=style_of(path), regrasps=sum(e.kind.regrasps for e in path),
                   placements=len(_intermediate(path)), edges=[e.kind.value for e in path],
                   waypoints=int(sum(len(p.waypoints) for p in phases)),

@@ -1,0 +1,241 @@
+"""Fingertip grasps of grasp frames, many at once: Saut et al. 2010, §IV-A-2 and §IV-A-3.
+
+For a grasp frame X_OG (the hand's grasp frame G in the object frame O) the grasp is
+built finger by finger, the opposing finger (robot.yaml's ``opposing``, the thumb) first:
+no stable grasp exists without it; then the others in robot.yaml order.  For each
+finger, the contact candidates are the surface samples inside its workspace spheres
+(:mod:`.workspace`, grown by the fingertip radius) whose outward normal faces the closing
+fingertip, ranked (:func:`_candidates`); finger IK puts the fingertip-sphere centre at
+``p + r_tip n``, seeded from a nearby workspace sample; the finger is checked against the
+object (the fingertip may touch it within the contact tolerance), the palm and the
+fingers placed.  The first candidate that passes is the finger's contact; a finger
+without one stays open.  With enough contacts (3 point contacts, 2 soft ones) the whole
+hand is checked against the object and the grasp goes to the force-closure test and the
+quality score (:func:`.single.scored_grasp`).
+
+A batch of frames goes finger by finger, so that everything that does not depend on a
+frame's earlier verdicts is one numpy call for all of them:
+
+* which fingers' workspaces hold each surface sample, in every frame: one lookup in one
+  voxel map of finger bits (:class:`.workspace.HandVoxels`), which also gives the seed
+  sample and the closing direction without a kd-tree query per candidate;
+* finger IK (damped least squares) for every candidate of every frame at once, on the
+  finger's chain in G (:mod:`model.chain`);
+* only then, frame by frame, the exact collision checks (coal, through pinocchio's
+  geometry model) over the candidates whose IK converged, best first.
+
+A frame's result does not depend on the other frames of its batch.  Verdicts are exact:
+a contact needs the fingertip centre within ``ik_tolerance`` of its target, collisions
+are coal's, force closure is the convex-hull test of :mod:`.quality`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from regrasp_cli.grasp.quality import force_ellipsoid_axis
+from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, scored_grasp
+from regrasp_cli.grasp.surface import Surface
+from regrasp_cli.grasp.workspace import FingerWorkspace, HandVoxels
+from regrasp_cli.model.chain import Chain
+
+FACING_COS = 0.2  # a candidate's normal faces the closing fingertip at least this squarely
+ALIGN_WEIGHT = 4.0  # weight of Nguyen's two-contact condition against the thumb (ranking)
+
+
+@dataclass(frozen=True)
+class Hints:
+    """Contacts to try first, per frame of a batch (frame O): ``p1, n1`` (F, 3) for the
+    opposing finger, ``p2, n2`` for finger ``finger`` (F,) (-1: no hint for that frame)."""
+
+    finger: np.ndarray
+    p1: np.ndarray
+    n1: np.ndarray
+    p2: np.ndarray
+    n2: np.ndarray
+
+    def rows(self, indices: np.ndarray) -> "Hints":
+        """The hints of the frames ``indices``."""
+        return Hints(*(x[indices] for x in (self.finger, self.p1, self.n1, self.p2, self.n2)))
+
+
+def batch_ik(chain: Chain, lower: np.ndarray, upper: np.ndarray, Q0: np.ndarray, p_G: np.ndarray,
+             iterations: int, tolerance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Damped least squares on the tip positions, every row at once.
+
+    ``Q0`` (B, d) seeds, ``p_G`` (B, 3) targets in G.  A row succeeds once its error is
+    below ``tolerance`` (m) and gives up when an iteration does not cut the squared error
+    by a fifth (stalled, typically against a joint limit) or after ``iterations``.
+    Returns the joint values (B, d), the success mask (B,) and the tip Jacobians at the
+    solutions (B, 3, d), frame G."""
+    Q = np.array(Q0, dtype=float)
+    B = len(Q)
+    ok = np.zeros(B, dtype=bool)
+    J_out = np.zeros((B, 3, Q.shape[1]))
+    live = np.arange(B)
+    last = np.full(B, np.inf)
+    for _ in range(iterations):
+        if not len(live):
+            break
+        p, J = chain.tip_and_jacobian(Q[live])
+        e = p_G[live] - p
+        err = np.einsum("bi,bi->b", e, e)
+        done = err < tolerance * tolerance
+        ok[live[done]] = True
+        J_out[live[done]] = J[done]
+        go = ~done & ~(err > 0.8 * last[live])
+        last[live] = err
+        live, J, e = live[go], J[go], e[go]
+        JJt = J @ J.transpose(0, 2, 1)
+        JJt[:, np.arange(3), np.arange(3)] += 1e-6
+        step = np.einsum("bid,bi->bd", J, np.linalg.solve(JJt, e[..., None])[..., 0])
+        Q[live] = np.clip(Q[live] + step, lower, upper)
+    return Q, ok, J_out
+
+
+def _candidates(voxels: HandVoxels, finger: int, ws: FingerWorkspace, inside: tuple[np.ndarray, np.ndarray],
+                surface: Surface, X_OG: np.ndarray, r_tip: float, anchor: tuple[np.ndarray, np.ndarray] | None,
+                limit: int) -> tuple[np.ndarray, ...]:
+    """Contact candidates of one finger in every frame X_OG (F, 4, 4) of a batch, best
+    first per frame.
+
+    ``inside`` (frame (c,), surface sample (c,)): the surface samples in the voxel map of
+    the finger's workspace spheres, frame by frame in surface order.  Those whose normal
+    faces the closing fingertip (cosine above 0.2, the closing direction of the workspace
+    sample nearest to the tip centre) are ranked by how squarely the fingertip pushes and,
+    after the opposing finger, by how well the contact lines up with its ``anchor``
+    contact (points, normals (F, 3), frame O): Nguyen's condition for two contacts, the
+    line joining them inside both friction cones.  The paper tries the spheres biggest
+    first; ranking every point in the spheres gave 1.4-1.6x more force-closure grasps
+    per frame (docs/DESIGN-NOTES.md).  Returns, per candidate row, its frame (c,), surface sample
+    (c,), nearest workspace sample (c,) and slot in its frame's order (c,), at most
+    ``limit`` rows per frame, rows sorted by (frame, slot)."""
+    fi, si = inside
+    R = X_OG[fi, :3, :3]  # a point of O in G is R^T (p - t)
+    p_G = np.einsum("nji,nj->ni", R, surface.points[si] - X_OG[fi, :3, 3])
+    n_G = np.einsum("nji,nj->ni", R, surface.normals[si])
+    near = voxels.nearest_sample(finger, ws, p_G + r_tip * n_G)  # near the tip centre: its closing direction
+    facing = -np.einsum("ij,ij->i", n_G, ws.sample_closing[near])
+    rank = facing
+    if anchor is not None:
+        a_p, a_n = anchor[0][fi], anchor[1][fi]
+        p, n = surface.points[si], surface.normals[si]
+        u = a_p - p
+        u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-12)
+        rank = facing + ALIGN_WEIGHT * (-np.einsum("ij,ij->i", n, u) + np.einsum("ij,ij->i", u, a_n))
+    keep = facing > FACING_COS
+    fi, si, rank = fi[keep], si[keep], rank[keep]
+    order = np.lexsort((-rank, fi))  # stable: ties keep the surface order, as the one-frame search
+    fi, si, tips = fi[order], si[order], (p_G + r_tip * n_G)[keep][order]
+    first = np.searchsorted(fi, fi, side="left")
+    slot = np.arange(len(fi)) - first
+    top = slot < limit
+    near = ws.tree.query(tips[top])[1] if top.any() else np.zeros(0, np.intp)  # the seeds: the nearest samples
+    return fi[top], si[top], near, slot[top]
+
+
+def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surface: Surface, X_OG: np.ndarray,
+                    frame_index: int, friction: float, rho: float, options: GraspOptions) -> tuple[Grasp | None, dict]:
+    """The grasp of one grasp frame X_OG (4, 4), or None; plus counters for the summary."""
+    grasps, stats = grasps_for_frames(hm, workspaces, surface, X_OG[None], np.array([frame_index]), friction, rho,
+                                      options)
+    return (grasps[0] if grasps else None), stats
+
+
+def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surface: Surface, X_OG: np.ndarray,
+                      frame_index: np.ndarray, friction: float, rho: float, options: GraspOptions,
+                      hints: Hints | None = None) -> tuple[list[Grasp], dict]:
+    """The grasps of frames ``X_OG`` (F, 4, 4) (indices ``frame_index`` (F,)), and counters
+    for the summary, summed over the frames: contact candidates, IK successes, candidates
+    colliding, frames with the palm in the object, with too few contacts, with the closed
+    hand colliding, not force closure.  With ``hints``, their contacts are tried first."""
+    h = hm.hand
+    chains = hm.chains()
+    F = len(X_OG)
+    stats = {"contacts": 0, "ik": 0, "collisions": 0, "palm": 0, "few_contacts": 0, "hand_collision": 0,
+             "not_force_closure": 0}
+    live = []
+    for b in range(F):  # the palm inside the object: no grasp from this frame
+        hm.set_object(X_OG[b])
+        if hm.collides(hm.q, set(), -1):
+            stats["palm"] += 1
+        else:
+            live.append(b)
+    live = np.array(live, dtype=np.intp)
+    n_f = len(h.finger_idx)
+    q = np.tile(hm.q, (F, 1))
+    in_contact = np.zeros((F, n_f), dtype=bool)
+    points, normals = np.full((F, n_f, 3), np.nan), np.full((F, n_f, 3), np.nan)
+    axes = np.zeros((F, n_f, 3))
+    placed: list[set[int]] = [set() for _ in range(F)]
+    R_GO = X_OG[:, :3, :3].transpose(0, 2, 1)
+    t_GO = -np.einsum("bij,bj->bi", R_GO, X_OG[:, :3, 3])
+    # which fingers' workspaces hold each surface sample, in every live frame: (F_live, S)
+    voxels = hm.hand_voxels(workspaces)
+    bits = voxels.lookup((surface.points @ X_OG[live, :3, :3] + t_GO[live, None]).reshape(-1, 3))
+    bits = bits.reshape(len(live), len(surface.points))
+    row = np.full(F, -1)
+    row[live] = np.arange(len(live))
+    thumb = h.opposing
+    for f in [thumb] + [f for f in range(n_f) if f != thumb]:
+        if not len(live):
+            break
+        ws, idx, r_tip = workspaces[f], h.finger_idx[f], h.spec.fingers[f].tip_radius
+        anchor = None if f == thumb else (points[live, thumb], normals[live, thumb])
+        inside = np.nonzero(bits[row[live]] & np.uint32(1 << f))
+        fl, si, near, slot = _candidates(voxels, f, ws, inside, surface, X_OG[live], r_tip, anchor,
+                                         options.candidates_per_finger)
+        cand_p, cand_n = surface.points[si], surface.normals[si]
+        if hints is not None:
+            hinted = np.flatnonzero((f == thumb) | (hints.finger[live] == f))
+            hp = (hints.p1 if f == thumb else hints.p2)[live[hinted]]
+            hn = (hints.n1 if f == thumb else hints.n2)[live[hinted]]
+            tip_G = np.einsum("bij,bj->bi", R_GO[live[hinted]], hp + r_tip * hn) + t_GO[live[hinted]]
+            fl, slot = np.concatenate([hinted, fl]), np.concatenate([np.full(len(hinted), -1), slot])
+            near = np.concatenate([ws.tree.query(tip_G)[1] if len(hinted) else np.zeros(0, np.intp), near])
+            cand_p, cand_n = np.concatenate([hp, cand_p]), np.concatenate([hn, cand_n])
+            order = np.lexsort((slot, fl))
+            fl, near, cand_p, cand_n = fl[order], near[order], cand_p[order], cand_n[order]
+        stats["contacts"] += len(fl)
+        b = live[fl]
+        target_G = np.einsum("bij,bj->bi", R_GO[b], cand_p + r_tip * cand_n) + t_GO[b]
+        Q, ok, J = batch_ik(chains[f], hm.robot.lower[idx], hm.robot.upper[idx], ws.sample_q[near], target_G,
+                            options.ik_iterations, options.ik_tolerance)
+        stats["ik"] += int(ok.sum())
+        for k in np.flatnonzero(ok):
+            frame = b[k]
+            if f in placed[frame]:
+                continue
+            qf = q[frame].copy()
+            qf[idx] = Q[k]
+            hm.set_object(X_OG[frame])
+            if hm.collides(qf, placed[frame], f):
+                stats["collisions"] += 1
+                continue
+            q[frame] = qf
+            placed[frame].add(f)
+            in_contact[frame, f] = True
+            points[frame, f], normals[frame, f] = cand_p[k], cand_n[k]
+            axes[frame, f] = X_OG[frame, :3, :3] @ force_ellipsoid_axis(J[k])
+        if f == thumb:  # no stable grasp without the thumb (§IV-A-2)
+            stats["few_contacts"] += int((~in_contact[live, thumb]).sum())
+            live = live[in_contact[live, thumb]]
+    need = 2 if h.spec.contact == "soft" else 3
+    grasps = []
+    for frame in live:
+        if in_contact[frame].sum() < need:
+            stats["few_contacts"] += 1
+            continue
+        hm.set_object(X_OG[frame])
+        if hm.collides(q[frame], set(range(n_f)), None):
+            stats["hand_collision"] += 1
+            continue
+        one: dict = {"not_force_closure": 0}
+        g, _ = scored_grasp(hm, surface, X_OG[frame], int(frame_index[frame]), q[frame], in_contact[frame],
+                            points[frame], normals[frame], axes[frame], friction, rho, options, one)
+        stats["not_force_closure"] += one["not_force_closure"]
+        if g is not None:
+            grasps.append(g)
+    return grasps, stats

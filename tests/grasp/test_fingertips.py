@@ -1,0 +1,93 @@
+"""The fingertip search (grasp.fingertips) on paper-known objects, a 6 cm cube and a
+sphere held by the default robot's right hand: every grasp it returns is force closure,
+its contacts lie on the object's surface with their outward normals, its fingertip
+centres (pinocchio's FK on the whole robot) sit at ``p + r n`` within the IK tolerance, and
+the closed hand clears the object but with its fingertips; a frame's grasp does not depend
+on the other frames of its batch; the batched finger IK reaches or says it failed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from regrasp_cli.grasp.fingertips import batch_ik, grasp_for_frame, grasps_for_frames
+from regrasp_cli.grasp.frames import grasp_frames
+from regrasp_cli.grasp.single import GraspOptions, HandModel
+from regrasp_cli.grasp.surface import build_surface, sampling_step
+from regrasp_cli.grasp.workspace import WorkspaceOptions, hand_workspace
+from regrasp_cli.model.robot import Kinematics
+from regrasp_cli.spatial import inverse
+
+HAND = "right"
+MESHES = {"cube": trimesh.creation.box((0.06, 0.06, 0.06)), "sphere": trimesh.creation.icosphere(3, 0.035)}
+
+
+@pytest.fixture(scope="module", params=sorted(MESHES))
+def searched(request, problem, cache_dir):
+    """(hand model, workspaces, surface, frames, rho, grasps, counters, mesh) for one mesh."""
+    mesh = MESHES[request.param]
+    robot = problem.robot
+    hm = HandModel(robot, HAND, mesh, problem.disabled.links(), 0.002)
+    ws = hand_workspace(robot, HAND, WorkspaceOptions(), cache_dir)
+    surface = build_surface(mesh, sampling_step(0.010), np.random.default_rng(0))
+    frames = grasp_frames(mesh.bounds, 2, 128)
+    rho = float(np.linalg.norm(mesh.extents) / 2)
+    grasps, stats = grasps_for_frames(hm, ws, surface, frames, np.arange(len(frames)), 0.5, rho, GraspOptions())
+    return hm, ws, surface, frames, rho, grasps, stats, mesh
+
+
+def test_grasps_are_force_closure_with_fingertips_on_their_contacts(searched):
+    hm, _, surface, frames, _, grasps, stats, mesh = searched
+    assert len(grasps) >= 3, stats
+    assert stats["palm"] + stats["few_contacts"] + stats["hand_collision"] + stats["not_force_closure"] \
+        + len(grasps) == len(frames)
+    robot, h = hm.robot, hm.hand
+    kin = Kinematics(robot)
+    for g in grasps:
+        assert g.scores.is_force_closure and g.scores.epsilon > 0
+        assert g.in_contact.sum() >= 3 and g.in_contact[h.opposing]
+        np.testing.assert_array_equal(g.X_OG, frames[g.frame_index])
+        q = hm.q.copy()
+        q[h.idx] = g.finger_q
+        assert robot.within_limits(q)
+        X_OW = g.X_OG @ inverse(kin.fk(q, h.grasp_frame))  # the world in O for this hand pose
+        for f in np.flatnonzero(g.in_contact):
+            p, n = g.points[f], g.normals[f]
+            _, dist, tri = trimesh.proximity.closest_point(mesh, p[None])
+            assert dist[0] < 1e-6 and mesh.face_normals[tri[0]] @ n > 0.99
+            tip_O = X_OW[:3, :3] @ kin.fk(q, h.tip_frames[f])[:3, 3] + X_OW[:3, 3]
+            r = h.spec.fingers[f].tip_radius
+            assert np.linalg.norm(tip_O - (p + r * n)) <= GraspOptions().ik_tolerance
+        hm.set_object(g.X_OG)
+        assert not hm.collides(q, set(range(len(h.finger_idx))), None)
+
+
+def test_a_frames_grasp_does_not_depend_on_its_batch(searched):
+    hm, ws, surface, frames, rho, grasps, _, _ = searched
+    for g in grasps[:4]:
+        alone, _ = grasp_for_frame(hm, ws, surface, frames[g.frame_index], g.frame_index, 0.5, rho, GraspOptions())
+        assert alone is not None
+        np.testing.assert_array_equal(alone.finger_q, g.finger_q)
+        np.testing.assert_array_equal(alone.points, g.points)
+    missing = sorted(set(range(len(frames))) - {g.frame_index for g in grasps})[:4]
+    for i in missing:
+        assert grasp_for_frame(hm, ws, surface, frames[i], i, 0.5, rho, GraspOptions())[0] is None
+
+
+def test_batch_ik_reaches_or_says_it_failed(robot):
+    h = robot.hands[HAND]
+    hm = HandModel(robot, HAND, trimesh.creation.box((0.05, 0.05, 0.05)), set(), 0.002)
+    chain = hm.chains()[1]
+    idx = h.finger_idx[1]
+    rng = np.random.default_rng(3)
+    Q_true = rng.uniform(robot.lower[idx], robot.upper[idx], (50, len(idx)))
+    targets = chain.tip_and_jacobian(Q_true)[0]
+    targets[-10:] += 0.5  # half a metre away: out of reach
+    seeds = np.clip(Q_true + rng.normal(0, 0.1, Q_true.shape), robot.lower[idx], robot.upper[idx])
+    Q, ok, _ = batch_ik(chain, robot.lower[idx], robot.upper[idx], seeds, targets, 30, 2e-4)
+    assert not ok[-10:].any()
+    assert ok[:40].mean() > 0.9
+    reached = chain.tip_and_jacobian(Q[ok])[0]
+    assert np.all(np.linalg.norm(reached - targets[ok], axis=1) < 2e-4)
+    assert np.all((Q >= robot.lower[idx]) & (Q <= robot.upper[idx]))
