@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import warnings
+from dataclasses import replace
 import sys
 import tempfile
 import time
@@ -55,9 +57,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--hand", default="right")
+    ap.add_argument("--target", type=int, default=None, help="distinct grasps per list (default: the build's)")
     ap.add_argument("--only", default="", help="comma-separated substrings of the object labels to run")
     ap.add_argument("--root", type=Path, default=ROOT, help="the checkout whose code is run")
     args = ap.parse_args()
+    warnings.simplefilter("ignore")  # the scans are not watertight: said once per mesh, not here
     sys.path.insert(0, str(args.root.resolve()))
     sys.path.insert(1, str(HERE))
     from benchlib import machine
@@ -66,7 +70,7 @@ def main() -> None:
     from regrasp_cli.grasp.workspace import WorkspaceOptions, hand_workspace
     from regrasp_cli.scene import load_problem
 
-    print(machine(jobs=args.jobs, hand=args.hand, code=str(args.root)) + "\n")
+    print(machine(jobs=args.jobs, hand=args.hand, target=args.target or "default", code=str(args.root)) + "\n")
     cases = [(label, mesh) for label, mesh in objects() if not args.only or any(s in label for s in args.only.split(","))]
     rates = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -80,7 +84,10 @@ def main() -> None:
             for old in (cache / "grasps").glob("*.h5") if (cache / "grasps").is_dir() else ():
                 old.unlink()
             t = time.perf_counter()
-            _, rep = build_grasps(scene, cache, args.hand, BuildOptions(jobs=args.jobs))
+            options = BuildOptions(jobs=args.jobs)
+            if args.target is not None:
+                options = replace(options, grasp=replace(options.grasp, target=args.target))
+            _, rep = build_grasps(scene, cache, args.hand, options)
             wall = time.perf_counter() - t
             rates.append((rep.kept / wall, label))
             print(f"| {label} | {rep.frames} | {rep.force_closure} | {rep.kept} | {wall:.1f} | {rep.kept / wall:.1f} |",

@@ -181,6 +181,7 @@ def _scene_with(tmp_path: Path, **object_fields) -> Path:
     ("flat_box", ("scene.yaml", "object.mesh", "flat_box.stl", "volume")),
     ("friction_0", ("scene.yaml", "object.friction")),
     ("friction_negative", ("scene.yaml", "object.friction")),
+    ("statuette_x30", ("scene.yaml", "object.mesh", "far larger than the right hand", "object.scale")),
 ])
 def test_bad_scene(tmp_path, cache_dir, case, words):
     if case == "degenerate_mesh":
@@ -189,6 +190,8 @@ def test_bad_scene(tmp_path, cache_dir, case, words):
         scene = _scene_with(tmp_path, mesh=str(_flat_box_stl(tmp_path)))
     elif case == "friction_0":
         scene = _scene_with(tmp_path, friction=0)
+    elif case == "statuette_x30":  # 6 m tall: a scale meant for a mesh in other units
+        scene = _scene_with(tmp_path, scale=30.0)
     else:
         scene = _scene_with(tmp_path, friction=-0.5)
     result = run("--cache-dir", cache_dir, "grasps", "build", scene, *SMALL)

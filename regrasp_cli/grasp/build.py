@@ -40,7 +40,7 @@ from regrasp_cli.model.handshape import StaticGeometry, hand_hits_static, hand_i
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.fingertips import Hints, grasps_for_frames
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel
-from regrasp_cli.grasp.surface import Surface, build_surface, sampling_step
+from regrasp_cli.grasp.surface import MAX_SAMPLES, Surface, build_surface, sampling_step
 from regrasp_cli.grasp.workspace import FingerWorkspace, WorkspaceOptions, hand_workspace
 from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.parallel import ordered_map
@@ -201,8 +201,8 @@ def _pinch_searches(context: _Search, supports: list[tuple[np.ndarray, float] | 
     h = context.hand_model.hand
     spec, thumb, ws = h.spec, h.opposing, context.workspaces
     r_tip = min(f.tip_radius for f in spec.fingers)
-    fine = build_surface(problem.object.mesh, sampling_step(r_tip) / 2, rng)
     grid = context.surface  # curvature read from its samples, so that the scores of both passes compare
+    fine = build_surface(problem.object.mesh, sampling_step(r_tip) / 2, rng, like=grid)
     fine = replace(fine, curvature=grid.curvature[grid.tree.query(fine.points)[1]])
     clearance = r_tip - problem.spec.planning.contact_tolerance  # tip centre above the support
     others = [f for f in range(len(ws)) if f != thumb]
@@ -246,12 +246,31 @@ class _Search(NamedTuple):
     hints: Hints | None = None  # per frame, the contacts to try first (pinch frames)
 
 
+def _check_size(problem: Problem, hand: str, step: float) -> None:
+    """Refuse an object too large for the hand: one whose surface sampled at the
+    fingertip's step (``step``, m) would take more than the surface model's limit of
+    samples (:data:`.surface.MAX_SAMPLES`), most likely a mesh in millimetres read as
+    metres or a wrong ``object.scale``; the line names the scene, the object and the hand."""
+    area = float(problem.object.mesh.area)
+    if area / step**2 > MAX_SAMPLES:
+        shape = hand_shapes(problem.robot, hand, problem.robot.hands[hand].open)[0]
+        lo = (shape.centres - shape.radii[:, None]).min(axis=0)
+        hi = (shape.centres + shape.radii[:, None]).max(axis=0)
+        extents = ' x '.join(f'{e:.3g}' for e in problem.object.extents)
+        raise InputError(problem.spec.file, "object.mesh",
+                         f"{problem.object.name} ({extents} m, {area:.3g} m^2 of surface) is far larger than the {hand} "
+                         f"hand ({np.linalg.norm(hi - lo):.2g} m across): sampling it at the fingertip's "
+                         f"{1000 * step:g} mm would take over {MAX_SAMPLES:,} points; is object.scale, or the "
+                         "mesh's unit, wrong?")
+
+
 def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> _Search:
     problem = load_problem(scene, cache_dir)
     robot = problem.robot
     if hand not in robot.hands:
         raise InputError(robot.spec.file, "hands", f"the robot has no {hand} hand (it has: {', '.join(robot.hands)})")
     tip_radius = min(f.tip_radius for f in robot.hands[hand].spec.fingers)
+    _check_size(problem, hand, sampling_step(tip_radius) / 2)  # the pinch passes sample twice as finely
     rng = np.random.default_rng(options.seed)
     surface = build_surface(problem.object.mesh, sampling_step(tip_radius), rng)
     hm = HandModel(robot, hand, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance)
@@ -351,6 +370,9 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
         """The target reached: enough distinct grasps, and enough clear of each support."""
         return bool(g_opts.target) and len(kept) >= g_opts.target and bool(np.all(clear.counts(kept) >= per_support))
 
+    def long_enough(kept: list[Grasp]) -> bool:
+        return bool(g_opts.target) and len(kept) >= g_opts.target
+
     def search(context: _Search, order: np.ndarray, stop) -> bool:
         """Run the frames of ``order`` until ``stop(kept)``; True once the target is reached."""
         nonlocal kept, done
@@ -372,24 +394,26 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
         return enough(kept)
 
     pinch_done = 0
-    if jaw or not g_opts.pinch_frames:
+    if jaw or not g_opts.pinch_frames:  # their frames are few and in random order: every support counts
         search(context, order, enough)
     else:
         # contacts first: pinch frames on each support of the object's stable placements
         # until enough grasps clear it, then anywhere on it; the grid of §IV-A-1 last
+        # (a support no pinch suits, such as a box's widest face for a small hand, leaves
+        # its pass short: only the number of grasps then asks for more frames)
         passes = _pinch_searches(context, [*supports, None])
         stops = [lambda kept, i=i: enough(kept) or clear.counts(kept)[i] >= per_support
-                 for i in range(len(supports))] + [enough]
+                 for i in range(len(supports))] + [long_enough]
         for (pinch, pinch_order), stop in zip(passes, stops):
             if stop(kept):
                 continue
             before = done
-            reached = search(pinch, pinch_order, stop)
+            search(pinch, pinch_order, stop)
             pinch_done += done - before
-            if reached:
+            if long_enough(kept):
                 break
         else:
-            search(context, order, enough)
+            search(context, order, long_enough)
     t_frames = time.perf_counter() - t1
 
     t2 = time.perf_counter()

@@ -124,6 +124,7 @@ class Surface:
     mass_centre: np.ndarray
     step: float
     watertight: bool
+    face_flip: np.ndarray | None = None  # (n_faces,) bool: faces whose normal was turned round (None: none)
 
     def __len__(self) -> int:
         return int(len(self.points))
@@ -132,14 +133,15 @@ class Surface:
         """The samples of index ``idx`` only (same mass centre, curvature scale, step)."""
         idx = np.asarray(idx, dtype=np.int64)
         return Surface(self.points[idx], self.normals[idx], self.curvature[idx], self.face_index[idx],
-                       cKDTree(self.points[idx]), self.mass_centre, self.step, self.watertight)
+                       cKDTree(self.points[idx]), self.mass_centre, self.step, self.watertight, self.face_flip)
 
     def plus(self, points: np.ndarray, normals: np.ndarray, curvature: np.ndarray) -> "Surface":
         """These samples and the given ones ((k, 3), (k, 3), (k,); face index -1)."""
         return Surface(np.vstack([self.points, points]), np.vstack([self.normals, normals]),
                        np.concatenate([self.curvature, curvature]),
                        np.concatenate([self.face_index, np.full(len(points), -1, dtype=self.face_index.dtype)]),
-                       cKDTree(np.vstack([self.points, points])), self.mass_centre, self.step, self.watertight)
+                       cKDTree(np.vstack([self.points, points])), self.mass_centre, self.step, self.watertight,
+                       self.face_flip)
 
     def within(self, centre, radius: float) -> np.ndarray:
         """Sorted indices of the samples within ``radius`` (m) of ``centre`` ((3,), m)."""
@@ -167,11 +169,14 @@ def sampling_step(tip_radius: float) -> float:
     return r
 
 
-def build_surface(mesh: trimesh.Trimesh, step: float, rng: np.random.Generator) -> Surface:
+def build_surface(mesh: trimesh.Trimesh, step: float, rng: np.random.Generator,
+                  like: Surface | None = None) -> Surface:
     """Sample ``mesh`` (object frame, metres) every ``step`` m; see the module docstring.
 
     ``mesh`` is not modified.  The result depends only on the mesh, ``step`` and the
-    state of ``rng`` (from which the sampling seed and the ray jitter are drawn).
+    state of ``rng`` (from which the sampling seed and the ray jitter are drawn).  With
+    ``like`` (a surface of the same mesh), its faces' orientation is taken instead of
+    casting rays again (the ray votes are most of the time on a scanned mesh).
 
     Raises:
         InputError: the mesh has no faces, non-finite vertices or zero area (field
@@ -220,11 +225,15 @@ def build_surface(mesh: trimesh.Trimesh, step: float, rng: np.random.Generator) 
     if not watertight:
         trimesh.repair.fix_winding(m)  # flips faces in place, keeps their order
     normals = np.asarray(m.face_normals, dtype=float)[face_index].copy()
+    face_flip = None
     if not watertight:
-        inward = _inward_votes(m, points, normals, rng)  # (n,) in [-R, R]
-        group = _orientation_groups(m)[face_index]
-        flip = (np.bincount(group, weights=inward) > 0.0)[group]
-        normals[flip] *= -1.0
+        if like is not None and like.face_flip is not None:
+            face_flip = like.face_flip
+        else:
+            inward = _inward_votes(m, points, normals, rng)  # (n,) in [-R, R]
+            groups = _orientation_groups(m)  # per face
+            face_flip = (np.bincount(groups[face_index], weights=inward, minlength=groups.max() + 1) > 0.0)[groups]
+        normals[face_flip[face_index]] *= -1.0
 
     tree = cKDTree(points)
     curvature = _curvature(points, tree)
@@ -241,6 +250,7 @@ def build_surface(mesh: trimesh.Trimesh, step: float, rng: np.random.Generator) 
         mass_centre=mass_centre,
         step=step_f,
         watertight=watertight,
+        face_flip=face_flip,
     )
 
 

@@ -144,6 +144,19 @@ def test_open_mesh_with_inconsistent_winding_gets_outward_normals(box, removed):
     assert np.linalg.norm(s.mass_centre) < 0.01
 
 
+def test_a_finer_surface_takes_the_faces_orientation_of_a_coarser_one(box):
+    """The pinch passes' surface (half the step) reads the grid surface's face orientation
+    instead of casting rays again: its normals are as outward as the coarse one's."""
+    broken, true_normals = _broken_box(box, 3)
+    with pytest.warns(UserWarning, match="mass centre"):
+        coarse = _build(broken, 0.008, seed=3)
+        fine = build_surface(broken, 0.004, np.random.default_rng(4), like=coarse)
+    assert len(fine) > 3 * len(coarse)
+    np.testing.assert_array_equal(fine.face_flip, coarse.face_flip)
+    outward = np.einsum("ij,ij->i", true_normals[fine.face_index], fine.normals) > 0.99
+    assert outward.mean() >= 0.95
+
+
 def test_triangle_soup_is_merged_and_treated_as_watertight(box):
     # every triangle stored separately (as in STL files), random windings
     faces = box.faces.copy()
