@@ -402,17 +402,14 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
         # (a support no pinch suits, such as a box's widest face for a small hand, leaves
         # its pass short: only the number of grasps then asks for more frames)
         passes = _pinch_searches(context, [*supports, None])
-        stops = [lambda kept, i=i: enough(kept) or clear.counts(kept)[i] >= per_support
+        stops = [lambda kept, i=i: clear.counts(kept)[i] >= per_support and long_enough(kept)
                  for i in range(len(supports))] + [long_enough]
         for (pinch, pinch_order), stop in zip(passes, stops):
-            if stop(kept):
-                continue
-            before = done
-            search(pinch, pinch_order, stop)
-            pinch_done += done - before
-            if long_enough(kept):
-                break
-        else:
+            if not stop(kept):
+                before = done
+                search(pinch, pinch_order, stop)
+                pinch_done += done - before
+        if not long_enough(kept):
             search(context, order, long_enough)
     t_frames = time.perf_counter() - t1
 

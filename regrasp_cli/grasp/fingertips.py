@@ -136,6 +136,22 @@ def _candidates(voxels: HandVoxels, finger: int, ws: FingerWorkspace, inside: tu
     return fi[top], si[top], near, slot[top]
 
 
+def _with_hints(hints: Hints, opposing: bool, finger: int, live: np.ndarray, X_OG: np.ndarray, ws: FingerWorkspace,
+                r_tip: float, fl: np.ndarray, slot: np.ndarray, near: np.ndarray, cand_p: np.ndarray,
+                cand_n: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The candidate rows (frame in ``live``, seed, point, normal in O) with each hinted
+    contact of this finger first in its frame."""
+    hinted = np.flatnonzero(opposing | (hints.finger[live] == finger))
+    hp = (hints.p1 if opposing else hints.p2)[live[hinted]]
+    hn = (hints.n1 if opposing else hints.n2)[live[hinted]]
+    X = X_OG[live[hinted]]
+    tip_G = np.einsum("bji,bj->bi", X[:, :3, :3], hp + r_tip * hn - X[:, :3, 3])
+    fl, slot = np.concatenate([hinted, fl]), np.concatenate([np.full(len(hinted), -1), slot])
+    near = np.concatenate([ws.tree.query(tip_G)[1] if len(hinted) else np.zeros(0, np.intp), near])
+    order = np.lexsort((slot, fl))
+    return fl[order], near[order], np.concatenate([hp, cand_p])[order], np.concatenate([hn, cand_n])[order]
+
+
 def grasp_for_frame(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], surface: Surface, X_OG: np.ndarray,
                     frame_index: int, friction: float, rho: float, options: GraspOptions) -> tuple[Grasp | None, dict]:
     """The grasp of one grasp frame X_OG (4, 4), or None; plus counters for the summary."""
@@ -189,15 +205,8 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
                                          options.candidates_per_finger)
         cand_p, cand_n = surface.points[si], surface.normals[si]
         if hints is not None:
-            hinted = np.flatnonzero((f == thumb) | (hints.finger[live] == f))
-            hp = (hints.p1 if f == thumb else hints.p2)[live[hinted]]
-            hn = (hints.n1 if f == thumb else hints.n2)[live[hinted]]
-            tip_G = np.einsum("bij,bj->bi", R_GO[live[hinted]], hp + r_tip * hn) + t_GO[live[hinted]]
-            fl, slot = np.concatenate([hinted, fl]), np.concatenate([np.full(len(hinted), -1), slot])
-            near = np.concatenate([ws.tree.query(tip_G)[1] if len(hinted) else np.zeros(0, np.intp), near])
-            cand_p, cand_n = np.concatenate([hp, cand_p]), np.concatenate([hn, cand_n])
-            order = np.lexsort((slot, fl))
-            fl, near, cand_p, cand_n = fl[order], near[order], cand_p[order], cand_n[order]
+            fl, near, cand_p, cand_n = _with_hints(hints, f == thumb, f, live, X_OG, ws, r_tip, fl, slot, near,
+                                                   cand_p, cand_n)
         stats["contacts"] += len(fl)
         b = live[fl]
         target_G = np.einsum("bij,bj->bi", R_GO[b], cand_p + r_tip * cand_n) + t_GO[b]

@@ -34,7 +34,7 @@ class GraspOptions:
     n_positions: int = 4  # grasp-frame positions in the object's bounding box
     n_orientations: int = 4096  # grasp-frame orientations (incremental SO(3) grid)
     target: int = 120  # stop once this many distinct grasps are found (0: try every frame) ...
-    support_share: float = 0.5  # ... and this share of it clear each support of the object's stable placements
+    support_share: float = 1.0  # ... and this share of it clear each support of the object's stable placements
     candidates_per_finger: int = 24  # contact candidates tried per finger before leaving it open
     contact_tolerance: float = 0.002  # fingertip-object penetration allowed, m
     ik_tolerance: float = 2e-4  # fingertip placement error accepted, m
