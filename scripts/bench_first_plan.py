@@ -56,10 +56,10 @@ def main() -> None:
                                 "--jobs", str(args.jobs)], capture_output=True, text=True, check=False)
             wall = time.perf_counter() - t
             status = json.loads(out.read_text())["status"] if out.is_file() else "no plan"
-            valid = "valid" in r.stdout.splitlines()[-1] if r.stdout.strip() else False
+            valid = r.returncode == 0 and any(line.strip() == "valid" for line in r.stdout.splitlines())
             times.append(wall)
             print(f"| {scene.stem.removeprefix('ycb16_').removesuffix('_behind')} | {wall:.1f} | {status} | "
-                  f"{'yes' if valid and r.returncode == 0 else 'no'} |", flush=True)
+                  f"{'yes' if valid else 'no'} |", flush=True)
     print(f"\nmedian {statistics.median(times):.1f} s over {len(times)} objects; slowest {max(times):.1f} s")
 
 
