@@ -9,7 +9,7 @@ the wall time, grasps per second, how many grasps clear each of the object's thr
 stable supports, and the median and the worst object, as a Markdown table.
 
     .venv/bin/python scripts/bench_grasps.py [--jobs 1] [--hand right] [--only mug,horse]
-    .venv/bin/python scripts/bench_grasps.py --root /tmp/old   # another checkout's code, same objects
+    .venv/bin/python scripts/bench_grasps.py --root ../old   # a worktree of an older commit, same objects
 
 ``--root`` runs the code of another checkout (a worktree of an older commit), for a
 side-by-side comparison on the same machine; its options are its own defaults.
