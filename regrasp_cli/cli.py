@@ -79,6 +79,19 @@ def cache_option(f):
                         help="Where cached artefacts are kept (as before the command; default: cache).")(f)
 
 
+def cluster_options(what: str, paths: str):
+    """--backend and --scheduler: where ``what`` go (the workers must see ``paths``)."""
+    def decorate(f):
+        f = click.option("--scheduler", default=None, metavar="ADDRESS",
+                         help="The Dask scheduler's address (e.g. tcp://host:8786), for --backend dask; the workers "
+                              f"must see {paths} at the same paths (a shared file system).")(f)
+        return click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky", show_default=True,
+                            help=f"{what} go to local loky processes (--jobs at once), or to the workers of an "
+                                 "existing Dask cluster (all its threads; needs --scheduler and pip install "
+                                 "'regrasp[dask]').")(f)
+    return decorate
+
+
 @main.command()
 @click.argument("scene", type=click.Path(path_type=Path))
 @seed_option()
@@ -110,12 +123,29 @@ def grasps() -> None:
                    "(0: none).")
 @click.option("--weights", type=str, default=None, metavar="FC,CENTROID,ELLIPSOID,CURVATURE",
               help="Weights of the quality terms (default 1,1,1,6 as in the paper).")
+@click.option("--meshes", type=click.Path(path_type=Path), default=None, metavar="DIR",
+              help="A dataset: build for each mesh file in DIR (.obj .stl .ply .off .glb, sorted by name; not "
+                   "its subfolders) in place of the scene's object, one task per mesh x hand, each with one job.")
+@cluster_options("With --meshes, the tasks", "the scene, the meshes and the cache folder")
 @cache_option
 @click.pass_context
 def grasps_build(ctx: click.Context, scene: Path, hand: str, seed: int | None, jobs: int,
                  positions: int | None, orientations: int | None, target: int | None, pinch_frames: int | None,
-                 weights: str | None) -> None:
-    """Compute the grasp list of each hand and store it in the cache (HDF5)."""
+                 weights: str | None, meshes: Path | None, backend: str, scheduler: str | None) -> None:
+    """Compute the grasp list of each hand and store it in the cache (HDF5).
+
+    With --meshes DIR, the lists of every mesh in DIR, in the cache as the one-scene build
+    names them; a table says how each went, and the command exits 1 if any failed."""
+    if meshes is not None:
+        from regrasp_cli.commands.dataset import run_dataset_build
+
+        run_dataset_build(scene, ctx.obj["cache_dir"], meshes, hand, seed, jobs, positions, orientations, target,
+                          weights, pinch_frames, backend=backend, scheduler=scheduler)
+        return
+    if backend != "loky" or scheduler is not None:
+        from regrasp_cli.errors import InputError
+
+        raise InputError(None, "--backend" if backend != "loky" else "--scheduler", "only with --meshes DIR")
     from regrasp_cli.commands.report import run_grasps_build
 
     run_grasps_build(scene, ctx.obj["cache_dir"], hand, seed, jobs, positions, orientations, target, weights,
@@ -358,12 +388,7 @@ def examples(folder: Path | None, force: bool) -> None:
 @click.option("--budget-s", type=float, default=None, help="Override the suite's wall-clock budget per run (s).")
 @click.option("--iterations", type=int, default=None,
               help="Override the suite's RRT-Connect iterations per query (every planner's).")
-@click.option("--backend", type=click.Choice(["loky", "dask"]), default="loky", show_default=True,
-              help="Where the runs go: local loky processes (--jobs at once), or the workers of an existing Dask "
-                   "cluster (all its threads; needs --scheduler and pip install 'regrasp[dask]').")
-@click.option("--scheduler", default=None, metavar="ADDRESS",
-              help="The Dask scheduler's address (e.g. tcp://host:8786), for --backend dask; the workers must "
-                   "see the cache and results folders at the same paths (a shared file system).")
+@cluster_options("The runs", "the cache and results folders")
 @cache_option
 @click.pass_context
 def bench(ctx: click.Context, suite_file: Path, output: Path | None, jobs: int, seeds: int | None,

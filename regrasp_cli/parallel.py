@@ -33,15 +33,15 @@ def _call(item):
 def ordered_map(fn: Callable[[Any, T], R], items: Iterable[T], jobs: int, context: Any = None) -> Iterator[R]:
     """``fn(context, item)`` for each item, over ``jobs`` forked processes (in this process
     when jobs <= 1), in order.  ``context`` may be anything, unpicklable included: the
-    workers inherit it (and ``fn``) at the fork; only items and results are pickled.  Not
-    for use from several threads at once.  Stopping the iteration early terminates the
+    workers inherit it (and ``fn``) at the fork; only items and results are pickled.  With
+    jobs > 1, not for use from several threads at once.  Stopping the iteration early terminates the
     workers."""
     items = list(items)
+    if jobs <= 1 or len(items) <= 1:  # no shared state: threads may each run a map in this process
+        yield from (fn(context, item) for item in items)
+        return
     previous, _RUNNING[0] = _RUNNING[0], (fn, context)
     try:
-        if jobs <= 1 or len(items) <= 1:
-            yield from map(_call, items)
-            return
         pool = multiprocessing.get_context("fork").Pool(min(jobs, len(items)))
         try:
             yield from pool.imap(_call, items)
