@@ -94,6 +94,7 @@ class Scratch:
     def __post_init__(self) -> None:
         self.kin = Kinematics(self.problem.robot)
         self._held: dict = {}  # local planners for a held object, by hand and placement
+        self.workable: dict = {}  # grasps clear of the obstacles and reached, by hand and pose (doublegrasp)
         self.backed_off: dict = {}  # pre-shapes backed off the contacts, by hand, grasp and distance (keyconf)
         self.local = LocalPlanner(self.options.resolution, self.options.cartesian_step / 2,
                                   joint_reach(self.problem.robot), self.options.coarse_checks)

@@ -4,11 +4,15 @@
    that hand works (the picking hand at the start pose, the placing hand at the goal): a
    grasp from below collides with the support.  The test places the hand alone
    (:mod:`model.handshape`), no IK needed.
-2. The survivors are ranked by a cheap score (normalised quality + approach cosine) and
-   turned into single-grasp configurations (:func:`keyconf.single_configuration`) until
-   ``single_per_hand`` are found: the paper's "collision-free single grasps
-   configurations" (4 right and 7 left in its scenario); the arm alone first, then, when
-   that leaves too few, with the torso leaning for the grasps the arm could not reach.
+2. The survivors that the torso and the arm together reach (one batched IK for the whole
+   list, :func:`~regrasp_cli.model.ik.arm_reachable`) are ranked by a cheap score
+   (normalised quality + approach cosine) and turned into single-grasp configurations
+   (:func:`keyconf.single_configuration`) until ``single_per_hand`` are found: the
+   paper's "collision-free single grasps configurations" (4 right and 7 left in its
+   scenario); the arm alone first, then, when that leaves too few, with the torso
+   leaning for the grasps the arm could not reach.  Each next grasp tried is the best
+   whose hand overlaps none of those found: spread over the object, they leave the
+   other hand partners (on the default scene, 11 free pairs of 6 x 6 instead of 1).
 3. Every pair of them is tested for hand-hand collision with both hands on the object;
    a pair's score is the normalised min of the two grasp qualities plus the normalised
    min of the two robot-configuration scores (approach cosine minus free-arm terms).
@@ -28,6 +32,7 @@ import numpy as np
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import Scratch
 from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hands_collide
+from regrasp_cli.model.ik import arm_reachable
 from regrasp_cli.manip.keyconf import SingleConfig, approach_axis, shoulder, single_configuration
 
 
@@ -35,6 +40,7 @@ from regrasp_cli.manip.keyconf import SingleConfig, approach_axis, shoulder, sin
 class SingleStats:
     listed: int  # grasps in the list
     environment_free: int  # after the environment filter
+    reachable: int  # of those, reached by the torso and arm together (model.ik.arm_reachable)
     tried: int  # turned into configurations (IK + collision)
     kept: int  # configurations found
 
@@ -60,6 +66,24 @@ def environment_free(grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarra
                      if not hand_hits_static(shapes[k], X_WO @ grasps.X_OG[k], env, touching=True)], dtype=int)
 
 
+def workable(scratch: Scratch, grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarray,
+             env: StaticGeometry) -> tuple[np.ndarray, np.ndarray]:
+    """The indices of the grasps whose hand clears the obstacles at X_WO
+    (:func:`environment_free`), and of those, the ones the torso and the arm together reach
+    (:func:`~regrasp_cli.model.ik.arm_reachable`, all at once): the rest would fail every
+    IK of :func:`keyconf.single_configuration`, at about 20-60 ms each.  Memoised in the
+    run's scratch by hand and pose, the reachability from a stream of its own, so that the
+    answer does not depend on the order of the calls."""
+    key = (grasps.hand, len(grasps), X_WO.tobytes())
+    if key not in scratch.workable:
+        free = environment_free(grasps, shapes, X_WO, env)
+        rng = np.random.default_rng([len(grasps), 38])
+        reach = arm_reachable(scratch.problem.robot, grasps.hand, X_WO @ grasps.X_OG[free], rng) if len(free) \
+            else np.zeros(0, dtype=bool)
+        scratch.workable[key] = (free, free[reach])
+    return scratch.workable[key]
+
+
 def cheap_order(scratch: Scratch, grasps: GraspList, ks: np.ndarray, X_WO: np.ndarray) -> np.ndarray:
     """``ks`` ordered by normalised grasp quality + cosine between the hand's approach and
     the shoulder->object direction (the rest posture's shoulder)."""
@@ -78,29 +102,47 @@ def single_configurations(scratch: Scratch, rng: np.random.Generator, grasps: Gr
                           attempts: int | None = None, lean: bool = True) -> tuple[list[SingleConfig], SingleStats]:
     """Up to ``wanted`` (default ``single_per_hand``) single-grasp configurations at X_WO,
     from the first ``attempts`` (default ``grasp_attempts``) of the grasps (all, or the
-    indices ``only``) that clear the obstacles, best cheap score first; without ``lean``
-    the arm alone reaches."""
+    indices ``only``) that clear the obstacles and that the arm reaches (:func:`workable`),
+    best cheap score first among those whose hand overlaps none of the configurations
+    found so far; without ``lean`` the arm alone reaches."""
     o = scratch.options
     wanted = o.single_per_hand if wanted is None else wanted
     attempts = o.grasp_attempts if attempts is None else attempts
-    free = environment_free(grasps, shapes, X_WO, env)
+    free, reached = workable(scratch, grasps, shapes, X_WO, env)
     if only is not None:
-        free = free[np.isin(free, only)]
-    ks = cheap_order(scratch, grasps, free, X_WO)
+        free, reached = free[np.isin(free, only)], reached[np.isin(reached, only)]
+    ks = cheap_order(scratch, grasps, reached, X_WO)
     found, tried = [], 0
+    overlap = _overlaps(grasps, shapes)
     # the arm alone first, as the paper; only when that leaves too few, the torso helps
     # with the grasps it could not reach (its postures are farther from the roadmap's)
     for leaning in (False, True)[:1 + lean]:
-        for k in ks[:attempts]:
-            if len(found) >= wanted:
-                break
-            if any(c.grasp == k for c in found):
-                continue
+        pending = [int(k) for k in ks[:attempts] if not any(c.grasp == k for c in found)]
+        while pending and len(found) < wanted:
+            # spread: the best grasp whose hand overlaps none found so far, else the best
+            # (a list's best grasps crowd one side, the top of a statuette: configurations
+            # all there leave the other hand no partner, §IV-B's pairs)
+            k = next((k for k in pending if not any(overlap(k, c.grasp) for c in found)), pending[0])
+            pending.remove(k)
             tried += not leaning
-            c = single_configuration(scratch, rng, grasps, int(k), X_WO, leaning)
+            c = single_configuration(scratch, rng, grasps, k, X_WO, leaning)
             if c is not None:
                 found.append(c)
-    return found, SingleStats(len(grasps), len(ks), tried, len(found))
+    return found, SingleStats(len(grasps), len(free), len(reached), tried, len(found))
+
+
+def _overlaps(grasps: GraspList, shapes: list[HandShape]):
+    """``overlap(k, j)``: would the hands of grasps k and j of one list, both on the
+    object, collide (they take the same part of it)?  Memoised."""
+    memo: dict[tuple[int, int], bool] = {}
+
+    def overlap(k: int, j: int) -> bool:
+        key = (min(k, j), max(k, j))
+        if key not in memo:
+            memo[key] = k == j or hands_collide(shapes[k], grasps.X_OG[k], shapes[j], grasps.X_OG[j])
+        return memo[key]
+
+    return overlap
 
 
 def partners(configs: list[SingleConfig], config_list: GraspList, config_shapes: list[HandShape],

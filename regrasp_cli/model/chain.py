@@ -112,3 +112,58 @@ def read_chain(robot: Robot, reference_frame: int, tip_frame: int, dofs: np.ndar
             b[k] = q[i]
     X_RP = inverse(model.frames[reference_frame].placement.homogeneous)
     return Chain(X_RP, placements, axes, prismatic, model.frames[tip_frame].placement.homogeneous, dofs, A, b)
+
+
+def tip_frames_and_jacobian(chain: Chain, q_dofs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tip frames (B, 4, 4) and their geometric Jacobians (B, 6, d) (linear rows first,
+    then angular; frame R, about the tip's origin) for ``q_dofs`` (B, d)."""
+    frames, X_RT = chain.forward(q_dofs)
+    axis_R = np.einsum("bnij,nj->bni", frames[:, :, :3, :3], chain.axes)  # (B, n, 3)
+    lever = X_RT[:, None, :3, 3] - frames[:, :, :3, 3]
+    linear = np.where(chain.prismatic[None, :, None], axis_R, np.cross(axis_R, lever))
+    angular = np.where(chain.prismatic[None, :, None], 0.0, axis_R)
+    return X_RT, np.einsum("bni,nd->bid", np.concatenate([linear, angular], axis=2), chain.A)
+
+
+def pose_error(X: np.ndarray, X_target: np.ndarray) -> np.ndarray:
+    """Errors (B, 6) from frames X to X_target (both (B, 4, 4), frame R): the position
+    difference, then half the sum of the axes' cross products (the rotation vector's
+    direction times the sine of the angle: zero only at the target, for angles below pi)."""
+    e_p = X_target[:, :3, 3] - X[:, :3, 3]
+    e_r = 0.5 * np.cross(X[:, :3, :3], X_target[:, :3, :3], axisa=1, axisb=1, axisc=1).sum(axis=2)
+    return np.concatenate([e_p, e_r], axis=1)
+
+
+def batch_pose_ik(chain: Chain, lower: np.ndarray, upper: np.ndarray, Q0: np.ndarray, X_target: np.ndarray,
+                  iterations: int = 60, tol_position: float = 1e-3, tol_rotation: float = 1e-2,
+                  damping: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+    """Damped least squares on the tip pose, every row at once, joints clamped to
+    [``lower``, ``upper``] (d,) after each step.
+
+    ``Q0`` (B, d) seeds, ``X_target`` (B, 4, 4) tip poses in R.  A row succeeds once its
+    position error is below ``tol_position`` (m) and the sine of its rotation error below
+    ``tol_rotation``; it gives up when an iteration does not cut its squared error by
+    1 % (stalled against a limit or out of reach) or after ``iterations``.  Returns the
+    joint values (B, d) and the success mask (B,)."""
+    Q = np.array(Q0, dtype=float)
+    ok = np.zeros(len(Q), dtype=bool)
+    live = np.arange(len(Q))
+    last = np.full(len(Q), np.inf)
+    for _ in range(iterations):
+        if not len(live):
+            break
+        X, J = tip_frames_and_jacobian(chain, Q[live])
+        e = pose_error(X, X_target[live])
+        e_p = np.einsum("bi,bi->b", e[:, :3], e[:, :3])
+        e_r = np.einsum("bi,bi->b", e[:, 3:], e[:, 3:])
+        done = (e_p < tol_position**2) & (e_r < tol_rotation**2)
+        ok[live[done]] = True
+        err = e_p + e_r
+        go = ~done & ~(err > 0.99 * last[live])
+        last[live] = err
+        live, J, e = live[go], J[go], e[go]
+        JJt = J @ J.transpose(0, 2, 1)
+        JJt[:, np.arange(6), np.arange(6)] += damping
+        step = np.einsum("bid,bi->bd", J, np.linalg.solve(JJt, e[..., None])[..., 0])
+        Q[live] = np.clip(Q[live] + np.clip(step, -0.5, 0.5), lower, upper)
+    return Q, ok

@@ -192,7 +192,8 @@ def _double_grasps(scratch: Scratch, lists: dict[str, GraspList], shapes: dict, 
     for hand, cfgs, st, where in ((g, cfg_g, st_g, "start"), (t, cfg_t, st_t, "goal")):
         if not cfgs:
             return (f"no collision-free {hand}-hand grasp configuration at the object's {where} pose "
-                    f"({st.environment_free} of {st.listed} grasps clear the obstacles, {st.tried} tried with IK)",
+                    f"({st.environment_free} of {st.listed} grasps clear the obstacles, {st.reachable} of them in the "
+                    f"arm's reach, {st.tried} tried with IK)",
                     counts)
     doubles = double_grasps(cfg_g, lists[g], shapes[g], cfg_t, lists[t], shapes[t])
     n_pairs = (len(cfg_g), len(cfg_t))

@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions, Scratch
-from regrasp_cli.manip.doublegrasp import DoubleGrasp, cheap_order, environment_free, single_configurations
+from regrasp_cli.manip.doublegrasp import DoubleGrasp, cheap_order, single_configurations, workable
 from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, search, \
     style_of, successors
 from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, SingleConfig, shoulder, single_configuration
@@ -242,8 +242,8 @@ class _Graph:
         def grasps(h: str, pid: str) -> np.ndarray:
             if (h, pid) not in order:
                 X_WO = self.placements[pid]
-                free = environment_free(self.lists[h], self.shapes[h], X_WO, self.env)
-                order[(h, pid)] = cheap_order(self.scratch, self.lists[h], free, X_WO)
+                _, reached = workable(self.scratch, self.lists[h], self.shapes[h], X_WO, self.env)
+                order[(h, pid)] = cheap_order(self.scratch, self.lists[h], reached, X_WO)
             return order[(h, pid)]
 
         def sample() -> Node:
