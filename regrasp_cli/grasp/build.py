@@ -273,7 +273,8 @@ def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> 
     _check_size(problem, hand, sampling_step(tip_radius) / 2)  # the pinch passes sample twice as finely
     rng = np.random.default_rng(options.seed)
     surface = build_surface(problem.object.mesh, sampling_step(tip_radius), rng)
-    hm = HandModel(robot, hand, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance)
+    hm = HandModel(robot, hand, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance,
+                   options.grasp.link_clearance)
     rho = float(np.linalg.norm(problem.object.extents) / 2)
     if robot.hands[hand].kind == "pads":
         pads = pad_geometry(hm)

@@ -91,3 +91,42 @@ def test_batch_ik_reaches_or_says_it_failed(robot):
     reached = chain.tip_and_jacobian(Q[ok])[0]
     assert np.all(np.linalg.norm(reached - targets[ok], axis=1) < 2e-4)
     assert np.all((Q >= robot.lower[idx]) & (Q <= robot.upper[idx]))
+
+
+def test_links_but_the_fingertips_keep_the_clearance_from_the_object(problem):
+    """A 6 cm cube moved until the palm is 0.1 mm from it: the palm is free of it without a
+    clearance, colliding with 0.3 mm (GraspOptions.link_clearance); 0.5 mm away, free."""
+    import pinocchio as pin
+
+    robot = problem.robot
+    strict = HandModel(robot, HAND, MESHES["cube"], problem.disabled.links(), 0.002, clearance=3e-4)
+    loose = HandModel(robot, HAND, MESHES["cube"], problem.disabled.links(), 0.002)
+
+    def palm_gap(X_OG):
+        """(distance, unit direction in G from the cube to the palm) of the nearest palm geometry."""
+        loose.set_object(X_OG)
+        pin.updateGeometryPlacements(robot.model, loose.data, loose.gm, loose.gd, robot.to_pin(loose.q))
+        found = [pin.computeDistance(loose.gm, loose.gd, k) for k, cp in enumerate(loose.gm.collisionPairs)
+                 if cp.second == loose.obj and loose.owner[cp.first] == -1]
+        r = min(found, key=lambda r: r.min_distance)
+        u_W = r.getNearestPoint1() - r.getNearestPoint2()
+        return r.min_distance, inverse(loose.X_WG)[:3, :3] @ u_W / np.linalg.norm(u_W)
+
+    def moved(X_OG, step_G):
+        X_GO = inverse(X_OG)
+        X_GO[:3, 3] += step_G
+        return inverse(X_GO)
+
+    X_OG = np.eye(4)
+    X_OG[:3, 3] = [0.0, 0.0, -0.2]
+    for _ in range(6):  # straight at the palm's nearest point
+        d, u = palm_gap(X_OG)
+        X_OG = moved(X_OG, (d - 1e-4) * u)
+    d, u = palm_gap(X_OG)
+    assert abs(d - 1e-4) < 2e-5
+    for hm, hits in ((strict, True), (loose, False)):
+        hm.set_object(X_OG)
+        assert hm.collides(hm.q, set(), -1) == hits
+    X_OG = moved(X_OG, -4e-4 * u)
+    strict.set_object(X_OG)
+    assert palm_gap(X_OG)[0] > 4e-4 and not strict.collides(strict.q, set(), -1)
