@@ -237,7 +237,9 @@ def execute(item: RunItem) -> dict:
     t0 = time.perf_counter()
     graph = {}
     rm = roadmap if item.planner == REFERENCE else None
-    stable = placements_for_style(item.style, Path(item.cache_dir), problem, False)[0]
+    # built if missing (a few tenths of a second, under the artefact's lock): an object with no
+    # stable placement has no file, and refusing to build made such runs crash under auto
+    stable = placements_for_style(item.style, Path(item.cache_dir), problem, True)[0]
     outcome = manipulation.plan_style(problem, lists, rm, options, item.seed, item.style, stable, keep=graph,
                                           sampler=item.sampler)
     t1 = time.perf_counter()
