@@ -26,7 +26,7 @@ from cli_helpers import (SMALL, assert_one_error_line, copy_artefacts, needs_sep
 ROOT = Path(__file__).resolve().parents[1]
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
 SEED = 0  # the scene's planning.seed
-RRT_SEED = 1  # the baseline does not solve every seed with its default budget; it solves this one
+RRT_SEED = 0  # the baseline does not solve every seed with its default budget; it solves this one
 PHASES = ("grasp", "close_right", "carry", "close_left", "open_right", "place", "open_left", "rest")
 # (kind, holding hands, touching, placement) of each phase: the right hand picks at the start
 # placement, hands over to the left, which places at the goal placement
@@ -234,8 +234,10 @@ def test_validate_rejects_a_moved_goal_placement(solved):
         goal["pose"][1][3] += 0.02
 
     out = validate_rejects(tampered(src, "moved_goal.json", change))
-    assert re.search(r"^attachment open_left\[0\]: the object jumps by 20 mm, [\d.e+-]+ rad between the end of phase "
-                     r"place and placement 'goal'$", out, re.M), out
+    m = re.search(r"^attachment open_left\[0\]: the object jumps by ([\d.]+) mm, [\d.e+-]+ rad between the end of "
+                  r"phase place and placement 'goal'$", out, re.M)
+    assert m, out
+    assert float(m.group(1)) == pytest.approx(20.0, abs=0.2)  # the arm IK places the object within 0.1 mm
 
 
 def test_validate_rejects_a_swapped_holding(solved):
