@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from bench.conftest import SEEDS, suite
-from cli_helpers import assert_one_error_line, needs_separate_stderr, run
+from cli_helpers import assert_one_error_line, needs_separate_stderr, run, scene_dict, write_scene
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -57,6 +57,21 @@ def test_a_run_over_budget_is_a_recorded_failure(cache_dir, tmp_path):
         assert x["reason"] == "exceeded the budget of 0.01 s (killed)"
     text = (out / "summary.md").read_text()
     assert "## Failures (2)" in text and "| 0/1 | 0 % |" in text
+
+
+def test_an_object_with_no_stable_placement_is_planned_without_placements(cache_dir, tmp_path):
+    """A ball has no stable placement, hence no placements file: under style auto its run
+    goes on to plan without placements (it crashed when the run refused to build the file)."""
+    d = scene_dict()
+    d["object"] = {**d["object"], "mesh": "builtin:ball"}
+    scene = write_scene(tmp_path / "ball.yaml", d)
+    out = tmp_path / "results"
+    r = run("--cache-dir", cache_dir, "bench", suite(tmp_path, scenes=[str(scene)], seeds=[0]), "-o", out, "--jobs", "1")
+    assert r.exit_code == 0, (r.output, r.exception)
+    (rec,) = records(out)
+    assert rec["stage"] != "crash" and "placements" not in rec["reason"], rec["reason"]
+    offline = json.loads((out / "meta.json").read_text())["offline"]["ball"]
+    assert offline["placements"]["status"].startswith("empty (")
 
 
 @needs_separate_stderr
