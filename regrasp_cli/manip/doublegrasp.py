@@ -59,6 +59,15 @@ def _normalise(x: np.ndarray) -> np.ndarray:
     return (x - x.min()) / span if span > 1e-12 else np.ones_like(x)
 
 
+def empty_list_reason(hand: str) -> str:
+    """Why a planner got no grasp of ``hand``: a stored list is never empty (its build fails
+    instead), so the scene's filter (:func:`~regrasp_cli.grasp.usable.usable_at_ends`)
+    left none: the hand alone hits an obstacle at the start and at the goal with each."""
+    return (f"the {hand} hand's grasp list is empty for this scene: none of its grasps is usable at the object's "
+            f"start or goal pose (the hand alone hits the support or an obstacle there; `regrasp grasps show` "
+            f"lists them)")
+
+
 def environment_free(grasps: GraspList, shapes: list[HandShape], X_WO: np.ndarray, env: StaticGeometry) -> np.ndarray:
     """Indices of the grasps whose hand at X_WO @ X_OG touches no obstacle (but with its
     fingertips, as it touches the object)."""

@@ -30,7 +30,7 @@ import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions, Scratch
-from regrasp_cli.manip.doublegrasp import DoubleGrasp, double_grasps, partners, single_configurations
+from regrasp_cli.manip.doublegrasp import DoubleGrasp, double_grasps, empty_list_reason, partners, single_configurations
 from regrasp_cli.manip.exchange import exchange_orientation, exchange_position, grid_nodes
 from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, single_shape, \
     palm_and_finger_links, static_geometry
@@ -233,9 +233,7 @@ def choose_hands(scratch: Scratch, lists: dict[str, GraspList], seed: int,
     problem = scratch.problem
     for h in ("right", "left"):
         if len(lists[h]) == 0:  # say so, not "0 of 0 grasps clear the obstacles"
-            raise _Failed(PlanningFailed(Stage.GRASPS, f"the {h} hand's grasp list is empty: no grasp of the object "
-                                                       f"was found for it (`regrasp grasps build --hand {h}` says "
-                                                       "why)"), {}, {})
+            raise _Failed(PlanningFailed(Stage.GRASPS, empty_list_reason(h)), {}, {})
     env = static_geometry(problem.spec.obstacles)
     shapes = {h: hand_shapes(problem.robot, h, lists[h].finger_q, problem.spec.planning.contact_tolerance)
               for h in ("right", "left")}

@@ -43,7 +43,7 @@ from scipy.spatial import cKDTree
 
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions, Scratch
-from regrasp_cli.manip.doublegrasp import DoubleGrasp, cheap_order, single_configurations, workable
+from regrasp_cli.manip.doublegrasp import DoubleGrasp, cheap_order, empty_list_reason, single_configurations, workable
 from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, search, \
     style_of, successors
 from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, SingleConfig, shoulder, single_configuration
@@ -601,8 +601,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         check_ends(scratch, [(problem.q_start, task.X_WO_start, "start"), (problem.q_goal, task.X_WO_goal, "goal")])
         for h in HANDS:
             if len(lists[h]) == 0:
-                raise PlanningFailed(Stage.GRASPS, f"the {h} hand's grasp list is empty: no grasp of the object was "
-                                                   f"found for it (`regrasp grasps build --hand {h}` says why)")
+                raise PlanningFailed(Stage.GRASPS, empty_list_reason(h))
     except PlanningFailed as exc:
         return Outcome(TASK, placements={START: task.X_WO_start, GOAL: task.X_WO_goal}, failure=exc)
     g = _Graph(scratch, lists, roadmap, {START: task.X_WO_start, GOAL: task.X_WO_goal}, graph, seed)
