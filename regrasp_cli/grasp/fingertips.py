@@ -39,7 +39,7 @@ from regrasp_cli.grasp.quality import force_ellipsoid_axis
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, scored_grasp
 from regrasp_cli.grasp.surface import Surface
 from regrasp_cli.grasp.workspace import FingerWorkspace, HandVoxels
-from regrasp_cli.model.chain import Chain
+from regrasp_cli.model.chain import Chain, batch_dls
 
 FACING_COS = 0.2  # a candidate's normal faces the closing fingertip at least this squarely
 ALIGN_WEIGHT = 4.0  # weight of Nguyen's two-contact condition against the thumb (ranking)
@@ -63,36 +63,23 @@ class Hints:
 
 def batch_ik(chain: Chain, lower: np.ndarray, upper: np.ndarray, Q0: np.ndarray, p_G: np.ndarray,
              iterations: int, tolerance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Damped least squares on the tip positions, every row at once.
+    """Damped least squares on the tip positions (:func:`~regrasp_cli.model.chain.batch_dls`).
 
     ``Q0`` (B, d) seeds, ``p_G`` (B, 3) targets in G.  A row succeeds once its error is
     below ``tolerance`` (m) and gives up when an iteration does not cut the squared error
     by a fifth (stalled, typically against a joint limit) or after ``iterations``.
     Returns the joint values (B, d), the success mask (B,) and the tip Jacobians at the
     solutions (B, 3, d), frame G."""
-    Q = np.array(Q0, dtype=float)
-    B = len(Q)
-    ok = np.zeros(B, dtype=bool)
-    J_out = np.zeros((B, 3, Q.shape[1]))
-    live = np.arange(B)
-    last = np.full(B, np.inf)
-    for _ in range(iterations):
-        if not len(live):
-            break
-        p, J = chain.tip_and_jacobian(Q[live])
-        e = p_G[live] - p
+    def residual(Q, rows):
+        p, J = chain.tip_and_jacobian(Q)
+        return p_G[rows] - p, J
+
+    def measure(e):
         err = np.einsum("bi,bi->b", e, e)
-        done = err < tolerance * tolerance
-        ok[live[done]] = True
-        J_out[live[done]] = J[done]
-        go = ~done & ~(err > 0.8 * last[live])
-        last[live] = err
-        live, J, e = live[go], J[go], e[go]
-        JJt = J @ J.transpose(0, 2, 1)
-        JJt[:, np.arange(3), np.arange(3)] += 1e-6
-        step = np.einsum("bid,bi->bd", J, np.linalg.solve(JJt, e[..., None])[..., 0])
-        Q[live] = np.clip(Q[live] + step, lower, upper)
-    return Q, ok, J_out
+        return err, err < tolerance * tolerance
+
+    Q, ok, J = batch_dls(residual, measure, Q0, lower, upper, iterations, 1e-6, 0.8)
+    return Q, ok, np.zeros((len(Q), 3, Q.shape[1])) if J is None else J
 
 
 def _candidates(voxels: HandVoxels, finger: int, ws: FingerWorkspace, inside: tuple[np.ndarray, np.ndarray],

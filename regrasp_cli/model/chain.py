@@ -134,36 +134,64 @@ def pose_error(X: np.ndarray, X_target: np.ndarray) -> np.ndarray:
     return np.concatenate([e_p, e_r], axis=1)
 
 
+def batch_dls(residual, measure, Q0: np.ndarray, lower: np.ndarray, upper: np.ndarray, iterations: int,
+              damping: float, stall: float, max_step: float = np.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Damped least squares, every row at once, joints clamped to [``lower``, ``upper``]
+    (d,) after each step of at most ``max_step`` per joint.
+
+    ``residual(Q, rows)`` gives the task errors e (b, m) and Jacobians (b, m, d) of the
+    rows ``rows`` (b,) of the batch at their joint values Q (b, d); ``measure(e)`` their
+    squared error (b,) and whether each has converged (b,).  A row succeeds once it has
+    converged and gives up when an iteration does not cut its squared error below
+    ``stall`` times the last (against a joint limit or out of reach) or after
+    ``iterations``.  Returns the joint values (B, d), the success mask (B,) and the
+    Jacobians at the solutions (B, m, d) (zero for the rows that failed)."""
+    Q = np.array(Q0, dtype=float)
+    B = len(Q)
+    ok = np.zeros(B, dtype=bool)
+    J_out = None
+    live = np.arange(B)
+    last = np.full(B, np.inf)
+    for _ in range(iterations):
+        if not len(live):
+            break
+        e, J = residual(Q[live], live)
+        if J_out is None:
+            J_out = np.zeros((B, *J.shape[1:]))
+        err, done = measure(e)
+        ok[live[done]] = True
+        J_out[live[done]] = J[done]
+        go = ~done & ~(err > stall * last[live])
+        last[live] = err
+        live, J, e = live[go], J[go], e[go]
+        m = J.shape[1]
+        JJt = J @ J.transpose(0, 2, 1)
+        JJt[:, np.arange(m), np.arange(m)] += damping
+        step = np.einsum("bid,bi->bd", J, np.linalg.solve(JJt, e[..., None])[..., 0])
+        if np.isfinite(max_step):
+            step = np.clip(step, -max_step, max_step)
+        Q[live] = np.clip(Q[live] + step, lower, upper)
+    return Q, ok, J_out
+
+
 def batch_pose_ik(chain: Chain, lower: np.ndarray, upper: np.ndarray, Q0: np.ndarray, X_target: np.ndarray,
                   iterations: int = 60, tol_position: float = 1e-3, tol_rotation: float = 1e-2,
                   damping: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
-    """Damped least squares on the tip pose, every row at once, joints clamped to
-    [``lower``, ``upper``] (d,) after each step.
+    """Damped least squares on the tip pose (:func:`batch_dls`), steps of at most 0.5 rad.
 
     ``Q0`` (B, d) seeds, ``X_target`` (B, 4, 4) tip poses in R.  A row succeeds once its
     position error is below ``tol_position`` (m) and the sine of its rotation error below
     ``tol_rotation``; it gives up when an iteration does not cut its squared error by
     1 % (stalled against a limit or out of reach) or after ``iterations``.  Returns the
     joint values (B, d) and the success mask (B,)."""
-    Q = np.array(Q0, dtype=float)
-    ok = np.zeros(len(Q), dtype=bool)
-    live = np.arange(len(Q))
-    last = np.full(len(Q), np.inf)
-    for _ in range(iterations):
-        if not len(live):
-            break
-        X, J = tip_frames_and_jacobian(chain, Q[live])
-        e = pose_error(X, X_target[live])
+    def residual(Q, rows):
+        X, J = tip_frames_and_jacobian(chain, Q)
+        return pose_error(X, X_target[rows]), J
+
+    def measure(e):
         e_p = np.einsum("bi,bi->b", e[:, :3], e[:, :3])
         e_r = np.einsum("bi,bi->b", e[:, 3:], e[:, 3:])
-        done = (e_p < tol_position**2) & (e_r < tol_rotation**2)
-        ok[live[done]] = True
-        err = e_p + e_r
-        go = ~done & ~(err > 0.99 * last[live])
-        last[live] = err
-        live, J, e = live[go], J[go], e[go]
-        JJt = J @ J.transpose(0, 2, 1)
-        JJt[:, np.arange(6), np.arange(6)] += damping
-        step = np.einsum("bid,bi->bd", J, np.linalg.solve(JJt, e[..., None])[..., 0])
-        Q[live] = np.clip(Q[live] + np.clip(step, -0.5, 0.5), lower, upper)
+        return e_p + e_r, (e_p < tol_position**2) & (e_r < tol_rotation**2)
+
+    Q, ok, _ = batch_dls(residual, measure, Q0, lower, upper, iterations, damping, 0.99, max_step=0.5)
     return Q, ok
