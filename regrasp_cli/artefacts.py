@@ -85,8 +85,8 @@ def empty_grasps_reason(problem: Problem, hand: str, report: gb.BuildReport) -> 
                     f"{1000 * jaw.width_closed:.1f} to {1000 * jaw.width_open:.1f} mm apart), so no grasp frame "
                     "was tried")
         return f"no candidate grasp frame on {what}"
-    few = report.frames - report.frames_palm_blocked - report.frames_with_contacts
-    causes = ((report.frames_palm_blocked, "the palm inside the object"), (few, "too few contacts"),
+    few = report.frames - report.frames_blocked - report.frames_with_contacts
+    causes = ((report.frames_blocked, "the palm (or a pinching finger) inside the object"), (few, "too few contacts"),
               (report.frames_with_contacts - report.force_closure, "the closed hand colliding or no force closure"))
     because = ", ".join(f"{n} with {why}" for n, why in causes if n > 0)
     return f"0 of {report.frames} candidate grasp frames on {what} gave a grasp ({because})"

@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 ROBOT_YAML = ROOT / "configs" / "robots" / "humanoid43" / "robot.yaml"
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
 # the small artefacts of the end-to-end plans: 20 grasps per hand, 12 nodes per roadmap
-SMALL = ("--grasp-target", "20", "--roadmap-nodes", "12")
+SMALL = ("--grasp-target", "40", "--roadmap-nodes", "12")
 
 CLICK_MAJOR_MINOR = tuple(int(x) for x in version("click").split(".")[:2])
 needs_separate_stderr = pytest.mark.skipif(CLICK_MAJOR_MINOR < (8, 2), reason="needs click >= 8.2 (separate stderr)")

@@ -61,7 +61,7 @@ def test_the_wheel_installs_outside_the_checkout_and_plans_the_shipped_scene(pro
     # and the scene's contents, not by where they are installed
     cache = copy_artefacts(Path(cache_dir), tmp_path / "cache")
     out = work / "plan.json"
-    _run([regrasp, "--cache-dir", cache, "plan", scene, "-o", out, "--grasp-target", "20", "--roadmap-nodes", "12",
+    _run([regrasp, "--cache-dir", cache, "plan", scene, "-o", out, "--grasp-target", "40", "--roadmap-nodes", "12",
           "--no-build"], cwd=work)
     plan = json.loads(out.read_text())
     assert plan["status"] == "solved"

@@ -179,12 +179,12 @@ def build_grasp_lists(scene: Path, cache_dir: Path, hands: list[str], options, c
 def _grasp_tables(spec, reports: list, console: Console) -> None:
     """The summary and time tables of built grasp lists ((GraspList, BuildReport) each)."""
     t = Table(title=f"Grasp lists ({spec.object.mesh}, friction {spec.object.friction:g})")
-    for c in ("hand", "frames tried", "of them pinch", "palm in object", "enough contacts", "force closure",
+    for c in ("hand", "frames tried", "of them pinch", "hand in object", "enough contacts", "force closure",
               "kept (distinct)", "best quality", "time (s)", "grasps/s"):
         t.add_column(c, justify="right")
     for glist, rep in reports:
         total = sum(rep.seconds.values())
-        t.add_row(rep.hand, str(rep.frames), str(rep.pinch_frames), str(rep.frames_palm_blocked),
+        t.add_row(rep.hand, str(rep.frames), str(rep.pinch_frames), str(rep.frames_blocked),
                   str(rep.frames_with_contacts),
                   str(rep.force_closure), str(rep.kept),
                   f"{glist.scores[0, -1]:.3f}" if len(glist) else "-", f"{total:.1f}",

@@ -4,9 +4,10 @@ Pipeline (fingertip hands; jaws: :mod:`.jaw`): object surface model (:mod:`.surf
 (:mod:`.workspace`, Algorithm 1, cached) -> grasp frames (:mod:`.frames`: positions in
 the object's bounding box x an incremental SO(3) grid; then :mod:`.pinch` frames across
 antipodal pairs, tried only when the grid leaves the list short) -> the grasp of each frame,
-a chunk of frames at a time (:mod:`.fingertips`), chunks in parallel over forked processes
--> force-closure filter and quality (:mod:`.quality`) -> near-duplicates removed -> sorted
-by quality -> HDF5 artefact.
+a chunk of frames at a time (:mod:`.fingertips`, which skips what the object's distance
+grid shows buried: :func:`.surface.distance_grid`), chunks in parallel over forked
+processes -> force-closure filter and quality (:mod:`.quality`) -> near-duplicates removed
+-> sorted by quality -> HDF5 artefact.
 
 A grasp list is context independent, as in the paper (§IV-A): it depends on the hand
 alone (its robot.yaml section, the joints, frames and collision geometry of its palm and
@@ -40,7 +41,7 @@ from regrasp_cli.model.handshape import StaticGeometry, hand_hits_static, hand_i
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.fingertips import Hints, grasps_for_frames
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel
-from regrasp_cli.grasp.surface import MAX_SAMPLES, Surface, build_surface, sampling_step
+from regrasp_cli.grasp.surface import MAX_SAMPLES, DistanceGrid, Surface, build_surface, distance_grid, sampling_step
 from regrasp_cli.grasp.workspace import FingerWorkspace, WorkspaceOptions, hand_workspace
 from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.parallel import ordered_map
@@ -52,7 +53,10 @@ from regrasp_cli.store import (Provenance, canonical_json, file_label, read_arte
 FORMAT, FORMAT_VERSION = "regrasp.grasps", 1
 CHUNK = 256  # frames per work item; the target is checked after each
 PINCH_WIDTH = 0.12  # m: widest antipodal pair tried for a pinch frame (the fingertips' reach decides)
+PINCH_ROLLS = 8  # turns of the hand about a pinch pair's axis tried (those burying a link dropped)
 PINCH_PLACEMENTS = 3  # the pinch pass levels its pairs with the supports of this many stable placements
+DISTANCE_MARGIN = 0.02  # m: the object's distance grid reaches this far out of its bounding box ...
+DISTANCE_STEP, DISTANCE_SAMPLES = 0.003, 30_000  # ... and reads samples this far apart (m), at most this many
 SCORE_NAMES = ("epsilon", "centroid", "ellipsoid", "curvature", "total")
 
 
@@ -99,7 +103,7 @@ class BuildReport:
     hand: str
     path: Path
     frames: int
-    frames_palm_blocked: int
+    frames_blocked: int  # the palm in the object, or a pinch frame's pinching fingers (.fingertips)
     pinch_frames: int  # of the frames, those of the pinch pass (.pinch)
     frames_with_contacts: int  # frames that got enough contacts for the stability test
     force_closure: int
@@ -221,11 +225,13 @@ def _pinch_searches(context: _Search, supports: list[tuple[np.ndarray, float] | 
         # contacts only where a fingertip clears the support (a pinch on a flat object whose
         # other fingers take contacts low on its rim goes through it), plus the rays' hits
         surface = fine.subset(among).plus(p2, n2, grid.curvature[grid.tree.query(p2)[1]])
-        frames, pair, finger = pinch_frames(ws[thumb], [ws[f] for f in others], radii, p1, n1, p2, n2, rng)
+        frames, pair, finger, thumb_sample, finger_sample = pinch_frames(
+            ws[thumb], [ws[f] for f in others], radii, p1, n1, p2, n2, rng, PINCH_ROLLS)
         n, k = len(context.frames), len(frames)
-        nan = np.full((n, 3), np.nan)
-        hints = Hints(np.concatenate([np.full(n, -1), np.array(others)[finger] if k else np.zeros(0, int)]),
-                      *(np.concatenate([nan, x[pair]]) for x in (p1, n1, p2, n2)))
+        nan, none = np.full((n, 3), np.nan), np.full(n, -1)
+        hints = Hints(np.concatenate([none, np.array(others)[finger] if k else np.zeros(0, int)]),
+                      *(np.concatenate([nan, x[pair]]) for x in (p1, n1, p2, n2)),
+                      np.concatenate([none, thumb_sample]), np.concatenate([none, finger_sample]))
         context = context._replace(surface=surface, frames=np.concatenate([context.frames, frames]), hints=hints)
         yield context, np.arange(n, n + k)
 
@@ -244,6 +250,7 @@ class _Search(NamedTuple):
     frames: np.ndarray  # (n, 4, 4) candidate grasp frames X_OG
     options: BuildOptions
     hints: Hints | None = None  # per frame, the contacts to try first (pinch frames)
+    distance: DistanceGrid | None = None  # the object's signed distance (fingertip hands' candidate ranking)
 
 
 def _check_size(problem: Problem, hand: str, step: float) -> None:
@@ -262,6 +269,14 @@ def _check_size(problem: Problem, hand: str, step: float) -> None:
                          f"hand ({np.linalg.norm(hi - lo):.2g} m across): sampling it at the fingertip's "
                          f"{1000 * step:g} mm would take over {MAX_SAMPLES:,} points; is object.scale, or the "
                          "mesh's unit, wrong?")
+
+
+def _dense(problem: Problem, surface: Surface, seed: int) -> Surface:
+    """The object's surface sampled every :data:`DISTANCE_STEP` (coarser on a large object:
+    at most :data:`DISTANCE_SAMPLES` samples), its faces oriented as ``surface``'s: what
+    the distance grid reads."""
+    step = max(DISTANCE_STEP, float(np.sqrt(problem.object.mesh.area / DISTANCE_SAMPLES)))
+    return build_surface(problem.object.mesh, step, np.random.default_rng([seed, 2]), like=surface)
 
 
 def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> _Search:
@@ -286,17 +301,18 @@ def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> 
                                 (geometry.width_closed, geometry.width_open), options.grasp.antipodal_samples, rng)
         return _Search(problem, surface, geometry, hm, rho, jaw_frames(geometry, pairs[0], pairs[2], rng), options)
     ws = hand_workspace(robot, hand, options.workspace, cache_dir)
-    hm.voxels(ws), hm.chains()  # built here, so that forked workers inherit them
+    hm.voxels(ws), hm.chains(), hm.sample_probes(ws)  # built here, so that forked workers inherit them
     frames = grasp_frames(problem.object.mesh.bounds, options.grasp.n_positions, options.grasp.n_orientations)
-    return _Search(problem, surface, ws, hm, rho, frames, options)
+    distance = distance_grid(_dense(problem, surface, options.seed), DISTANCE_MARGIN)
+    return _Search(problem, surface, ws, hm, rho, frames, options, None, distance)
 
 
 def _run_chunk(context: _Search, indices: np.ndarray):
-    problem, surface, ws, hm, rho, frames, options, hints = context
+    problem, surface, ws, hm, rho, frames, options, hints, distance = context
     friction = problem.spec.object.friction
     if not isinstance(ws, (Jaw, PadHand)):  # fingertip hands: the whole chunk at once
         return grasps_for_frames(hm, ws, surface, frames[indices], indices, friction, rho, options.grasp,
-                                 None if hints is None else hints.rows(indices))
+                                 None if hints is None else hints.rows(indices), distance)
     grasps, stats = [], {}
     for i in indices:
         if isinstance(ws, Jaw):
@@ -427,7 +443,7 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
     t_write = time.perf_counter() - t2
 
     tested = len(grasps) + stats.get("not_force_closure", 0)
-    report = BuildReport(hand, path, done, stats.get("palm", 0), pinch_done,
+    report = BuildReport(hand, path, done, stats.get("palm", 0) + stats.get("buried", 0), pinch_done,
                          tested + stats.get("hand_collision", 0),
                          len(grasps), len(kept),
                          {"surface + workspace + frames": t_prep, "grasp search (frames)": t_frames,

@@ -29,8 +29,9 @@ CLOSING_COS = 0.3  # both fingertips close towards each other at least this squa
 
 
 def tip_pairs(thumb: FingerWorkspace, finger: FingerWorkspace, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs of fingertip-centre samples (thumb, finger), each (m, 3) in G, that close
-    towards each other, drawn from up to :data:`PAIR_SAMPLES` samples of each finger."""
+    """Pairs of interior samples (thumb, finger), as sample indices (m,) of each, whose
+    fingertip centres close towards each other, drawn from up to :data:`PAIR_SAMPLES`
+    samples of each finger."""
     it = rng.choice(len(thumb.samples), size=min(PAIR_SAMPLES, len(thumb.samples)), replace=False)
     jf = rng.choice(len(finger.samples), size=min(PAIR_SAMPLES, len(finger.samples)), replace=False)
     a, b = thumb.samples[it], finger.samples[jf]
@@ -40,31 +41,34 @@ def tip_pairs(thumb: FingerWorkspace, finger: FingerWorkspace, rng: np.random.Ge
     ok = (np.einsum("ijk,ik->ij", u, thumb.sample_closing[it]) > CLOSING_COS) \
         & (-np.einsum("ijk,jk->ij", u, finger.sample_closing[jf]) > CLOSING_COS) & (d > 1e-6)
     i, j = np.nonzero(ok)
-    return a[i], b[j]
+    return it[i], jf[j]
 
 
 def pinch_frames(thumb: FingerWorkspace, fingers: list[FingerWorkspace], radii: tuple[float, list[float]],
                  p1: np.ndarray, n1: np.ndarray, p2: np.ndarray, n2: np.ndarray,
-                 rng: np.random.Generator, rolls: int = 8) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 rng: np.random.Generator, rolls: int = 8) -> tuple[np.ndarray, ...]:
     """Grasp frames X_OG (k, 4, 4), ``rolls`` per antipodal pair (p1, n1), (p2, n2) (each
     (k, 3), frame O) that some tip pair can span within 3 mm: the thumb's tip centre on
     ``p1 + r n1``, a finger's (the fingers taken in turn) on ``p2 + r n2``, up to the
     mismatch of their distances, split evenly; the hand turned about the pair's axis by
-    evenly spaced angles from a random one.  ``radii`` = (thumb tip radius, finger tip
+    evenly spaced angles from a random one; the first turn of every pair first, then the
+    second, and so on.  ``radii`` = (thumb tip radius, finger tip
     radii).  Also returns, per frame, the index of its pair and of its finger (in
-    ``fingers``): the contacts the search tries first (:func:`.fingertips.grasps_for_frames`)."""
+    ``fingers``): the contacts the search tries first (:func:`.fingertips.grasps_for_frames`);
+    and the indices of the thumb's and the finger's workspace samples put on the targets."""
     r_thumb, r_fingers = radii
     k = len(p1)
     f_of = np.arange(k) % max(len(fingers), 1)  # the fingers taken in turn
-    frames, which, finger = [], [], []
+    frames, which, finger, samples, turn = [], [], [], [], []
     for f, ws in enumerate(fingers):
-        a, b = tip_pairs(thumb, ws, rng)
+        ia, ib = tip_pairs(thumb, ws, rng)
+        a, b = thumb.samples[ia], ws.samples[ib]
         j = np.flatnonzero(f_of == f)
         if not len(a) or not len(j):
             continue
         spans = np.linalg.norm(b - a, axis=1)
         order = np.argsort(spans, kind="stable")  # sorted by span, for a binary search per target
-        a, b, spans = a[order], b[order], spans[order]
+        a, b, ia, ib, spans = a[order], b[order], ia[order], ib[order], spans[order]
         c1, c2 = p1[j] + r_thumb * n1[j], p2[j] + r_fingers[f] * n2[j]
         span = np.linalg.norm(c2 - c1, axis=1)
         lo, hi = np.searchsorted(spans, span - 0.003), np.searchsorted(spans, span + 0.003)
@@ -82,10 +86,14 @@ def pinch_frames(thumb: FingerWorkspace, fingers: list[FingerWorkspace], radii: 
         X[:, :3, 3] = np.repeat((c1 + c2) / 2, rolls, axis=0) - np.einsum("nij,nj->ni", R, mid_G)
         frames.append(X)
         which.append(np.repeat(j, rolls))
+        turn.append(np.tile(np.arange(rolls), len(j)))
         finger.append(np.full(len(X), f))
+        samples.append(np.repeat(np.column_stack([ia[m], ib[m]]), rolls, axis=0))
     if not frames:
-        return np.zeros((0, 4, 4)), np.zeros(0, np.intp), np.zeros(0, np.intp)
-    # in the order of the pairs, each pair's rolls together
-    which, finger, frames = np.concatenate(which), np.concatenate(finger), np.concatenate(frames)
-    order = np.argsort(which, kind="stable")
-    return frames[order], which[order], finger[order]
+        return np.zeros((0, 4, 4)), np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.intp), \
+            np.zeros(0, np.intp)
+    # one turn of every pair, in the order of the pairs, then the next turn of every pair:
+    # a search stopped early has spread over the pairs
+    which, finger, frames, samples, turn = map(np.concatenate, (which, finger, frames, samples, turn))
+    order = np.lexsort((which, turn))
+    return frames[order], which[order], finger[order], samples[order, 0], samples[order, 1]

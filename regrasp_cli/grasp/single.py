@@ -19,7 +19,7 @@ import numpy as np
 import pinocchio as pin
 
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights, grasp_quality
-from regrasp_cli.grasp.surface import Surface
+from regrasp_cli.grasp.surface import DistanceGrid, Surface
 from regrasp_cli.grasp.workspace import FingerWorkspace, HandVoxels, SphereVoxels, hand_voxels, sphere_voxels
 from regrasp_cli.model.collision import cold_start, eroded_geometry, mesh_geometry
 from regrasp_cli.model.chain import Chain, read_chain
@@ -63,6 +63,30 @@ class Grasp:
     scores: GraspScores
 
 
+@dataclass(frozen=True)
+class LinkProbes:
+    """Spheres inside the link geometries of a finger but its fingertip (:func:`link_probes`),
+    each hanging from a joint of the finger's chain (:mod:`model.chain`).  Where they lie in
+    the object tells which finger postures bury a phalanx in it, far more cheaply than the
+    exact check, which alone decides (:mod:`.fingertips` orders the checks by it)."""
+
+    joint: np.ndarray  # (P,) index in the chain of the joint each sphere hangs from
+    p_J: np.ndarray  # (P, 3) centres in that joint's frame, m
+    radii: np.ndarray  # (P,) m
+
+    def centres(self, frames: np.ndarray) -> np.ndarray:
+        """Centres (B, P, 3) in the chain's frame for its joint frames ``frames`` (B, n, 4, 4)."""
+        X = frames[:, self.joint]
+        return np.einsum("bpij,pj->bpi", X[..., :3, :3], self.p_J) + X[..., :3, 3]
+
+    def depth(self, centres_O: np.ndarray, distance: DistanceGrid) -> np.ndarray:
+        """How deep (m) the deepest sphere of each row of centres (B, P, 3) in O lies in the
+        object, by the ``distance`` grid (negative: clear of it by that much; -inf: no sphere)."""
+        if not len(self.radii):
+            return np.full(len(centres_O), -np.inf)
+        return np.max(self.radii - distance(centres_O), axis=1)
+
+
 class HandModel:
     """The hand alone, with the object attached to its grasp frame: the scratch for the
     per-frame grasp search (one per process).  The fingertips may sink ``tolerance`` (m)
@@ -87,6 +111,7 @@ class HandModel:
         gm = pin.GeometryModel()
         self.owner: list[int] = []  # finger index of each geometry, -1 for the palm
         self.erosion: list[float] = []  # m the fingertips are shrunk by (the contact tolerance)
+        self.is_tip: list[bool] = []  # a fingertip's geometry
         tips = {model.frames[t].name for t in h.tip_frames}
         links = []
         for go in src.geometryObjects:
@@ -95,6 +120,7 @@ class HandModel:
                 name = model.frames[go.parentFrame].name
                 geom = eroded_geometry(go.geometry, tolerance) if name in tips else None
                 self.erosion.append(tolerance if geom is not None else 0.0)
+                self.is_tip.append(name in tips)
                 gm.addGeometryObject(pin.GeometryObject(go.name, j, go.parentFrame, go.placement,
                                                         geom or go.geometry))
                 self.owner.append(self.finger_of_joint.get(j, -1))
@@ -131,6 +157,9 @@ class HandModel:
         self.X_WG = kin.fk(self.q, h.grasp_frame)
         self._voxels: tuple[int, tuple[SphereVoxels, ...], HandVoxels] | None = None
         self._chains: tuple[Chain, ...] | None = None
+        self._probes: tuple[LinkProbes, ...] | None = None
+        self._sample_probes: tuple[int, tuple[np.ndarray, ...]] | None = None
+        self._palm_probes: tuple[np.ndarray, np.ndarray] | None = None
         self._object_at: bytes | None = None
         self._pair_memo: dict[tuple[frozenset[int], int | None], list[int]] = {}
 
@@ -150,6 +179,49 @@ class HandModel:
             self._chains = tuple(read_chain(self.robot, h.grasp_frame, h.tip_frames[f], idx, self.q)
                                  for f, idx in enumerate(h.finger_idx))
         return self._chains
+
+    def probes(self) -> tuple["LinkProbes", ...]:
+        """Per finger, spheres inside the geometries of its links but the fingertip
+        (:class:`LinkProbes`, built on first use)."""
+        if self._probes is None:
+            gos = self.gm.geometryObjects
+            out = []
+            for f, chain in enumerate(self.chains()):
+                joint, centres, radii = [np.zeros(0, int)], [np.zeros((0, 3))], [np.zeros(0)]
+                for g, go in enumerate(gos[:len(self.owner)]):
+                    if self.owner[g] != f or self.is_tip[g] or go.parentJoint not in chain.joints:
+                        continue
+                    p_L, r = link_probes(go.geometry)
+                    centres.append(p_L @ go.placement.rotation.T + go.placement.translation)
+                    joint.append(np.full(len(r), chain.joints.index(go.parentJoint)))
+                    radii.append(r)
+                out.append(LinkProbes(np.concatenate(joint), np.concatenate(centres), np.concatenate(radii)))
+            self._probes = tuple(out)
+        return self._probes
+
+    def palm_probes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Spheres inside the palm's geometries (:func:`link_probes`): centres (P, 3) in G, radii (P,)."""
+        if self._palm_probes is not None:
+            return self._palm_probes
+        X_GJ = inverse(self.X_JG)
+        centres, radii = [np.zeros((0, 3))], [np.zeros(0)]
+        for g, go in enumerate(self.gm.geometryObjects[:len(self.owner)]):
+            if self.owner[g] == -1:
+                p_L, r = link_probes(go.geometry)
+                p_J = p_L @ go.placement.rotation.T + go.placement.translation
+                centres.append(p_J @ X_GJ[:3, :3].T + X_GJ[:3, 3])
+                radii.append(r)
+        self._palm_probes = (np.concatenate(centres), np.concatenate(radii))
+        return self._palm_probes
+
+    def sample_probes(self, workspaces: tuple[FingerWorkspace, ...]) -> tuple[np.ndarray, ...]:
+        """Per finger, its :class:`LinkProbes` centres (m, P, 3) in G at each interior sample of
+        its workspace (built on first use)."""
+        if self._sample_probes is None or self._sample_probes[0] != id(workspaces):
+            self._sample_probes = (id(workspaces), tuple(
+                lp.centres(chain.forward(ws.sample_q)[0]) if len(ws.sample_q) else np.zeros((0, len(lp.radii), 3))
+                for lp, chain, ws in zip(self.probes(), self.chains(), workspaces)))
+        return self._sample_probes[1]
 
     def hand_voxels(self, workspaces: tuple[FingerWorkspace, ...]) -> HandVoxels:
         """The fingers' voxel maps as one map of finger bits (:class:`.workspace.HandVoxels`)."""
@@ -183,6 +255,22 @@ class HandModel:
             if pin.computeCollision(self.gm, self.gd, k):
                 return True
         return False
+
+
+def link_probes(geometry) -> tuple[np.ndarray, np.ndarray]:
+    """Spheres inside a link geometry's local bounding box, centres (P, 3) in the
+    geometry's frame and radii (P,): as wide as the box's thinnest side, a radius apart
+    over its two longer sides (a cylinder's or capsule's core; a box's or mesh's, roughly)."""
+    geometry.computeLocalAABB()
+    lo, hi = np.asarray(geometry.aabb_local.min_), np.asarray(geometry.aabb_local.max_)
+    half, centre = (hi - lo) / 2, (hi + lo) / 2
+    thin = int(np.argmin(half))
+    r = max(float(half[thin]), 1e-4)
+    axes = [centre[d] + (np.zeros(1) if d == thin else
+                         np.linspace(-max(half[d] - r, 0.0), max(half[d] - r, 0.0),
+                                     int(np.ceil(2 * max(half[d] - r, 0.0) / r)) + 1)) for d in range(3)]
+    p = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    return p, np.full(len(p), r)
 
 
 def scored_grasp(hm: HandModel, surface: Surface, X_OG: np.ndarray, frame_index: int, q: np.ndarray,

@@ -413,3 +413,64 @@ def mass_centre_of(m: trimesh.Trimesh, watertight: bool) -> np.ndarray:
         stacklevel=3,
     )
     return centre
+
+
+#: Most cells of a :class:`DistanceGrid` (the resolution grows to stay below it).
+MAX_GRID_CELLS = 400_000
+
+
+@dataclass(frozen=True)
+class DistanceGrid:
+    """An estimate of the signed distance to an object's surface (m, negative inside) on a
+    voxel grid over its bounding box grown by ``margin``, frame O (:func:`distance_grid`):
+    within a few millimetres of the true distance, a ranking aid (:mod:`.fingertips`),
+    never a collision verdict."""
+
+    origin: np.ndarray  # (3,) centre of cell (0, 0, 0)
+    resolution: float  # m
+    values: np.ndarray  # (nx, ny, nz) float32
+    margin: float  # m: the value of every point off the grid
+
+    def __call__(self, p_O: np.ndarray) -> np.ndarray:
+        """The signed distance at each point (..., 3) (shape (...))."""
+        p = np.asarray(p_O).reshape(-1, 3)
+        ijk = np.rint((p - self.origin) / self.resolution).astype(np.intp)
+        shape = np.array(self.values.shape)
+        inside = np.all((ijk >= 0) & (ijk < shape), axis=1)
+        out = np.full(len(p), self.margin, dtype=np.float32)
+        i = ijk[inside]
+        out[inside] = self.values[i[:, 0], i[:, 1], i[:, 2]]
+        return out.reshape(np.shape(p_O)[:-1])
+
+
+def distance_grid(surface: Surface, margin: float, resolution: float = 0.002) -> DistanceGrid:
+    """The :class:`DistanceGrid` of ``surface`` over its samples' bounding box grown by
+    ``margin`` (m, more than two steps), at ``resolution`` (m) or coarser (at most
+    :data:`MAX_GRID_CELLS` cells).
+
+    A cell within two steps of a sample takes the distance to that nearest sample's
+    tangent plane.  Farther, two steps plus the distance to the nearest such cell, negative in the regions
+    of such cells that do not reach the grid's border: the side of a scanned mesh's
+    tangent planes is wrong beyond its edges and rims (a cell 4 cm off a can's rim read
+    8 mm inside), whereas open space, a cup's or a bowl's inside included, is connected."""
+    from scipy.ndimage import distance_transform_edt, label
+
+    lo, hi = surface.points.min(axis=0) - margin, surface.points.max(axis=0) + margin
+    volume = float(np.prod(hi - lo))
+    resolution = max(resolution, (volume / MAX_GRID_CELLS) ** (1 / 3))
+    shape = tuple(np.ceil((hi - lo) / resolution).astype(int) + 1)
+    axes = [lo[d] + resolution * np.arange(shape[d]) for d in range(3)]
+    X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    near = 2 * surface.step
+    dist, i = surface.tree.query(X, distance_upper_bound=near)  # a far cell's exact query: 90 % of the time
+    far = ~np.isfinite(dist)
+    i[far] = 0
+    values = np.einsum("ij,ij->i", X - surface.points[i], surface.normals[i])
+    regions, _ = label(far.reshape(shape))
+    border = np.unique(np.concatenate([regions[0].ravel(), regions[-1].ravel(), regions[:, 0].ravel(),
+                                       regions[:, -1].ravel(), regions[:, :, 0].ravel(), regions[:, :, -1].ravel()]))
+    outside = np.isin(regions, border[border > 0]).ravel()
+    # a far cell: two steps plus its distance to the nearest near cell
+    depth = near + resolution * distance_transform_edt(far.reshape(shape)).ravel()
+    values[far] = np.where(outside[far], depth[far], -depth[far])
+    return DistanceGrid(lo, resolution, values.astype(np.float32).reshape(shape), float(margin))

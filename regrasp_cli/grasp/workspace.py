@@ -93,15 +93,17 @@ class SphereVoxels:
 class HandVoxels:
     """The voxel maps of all fingers of a hand on one lattice: per voxel, bit f set when
     finger f's map holds it (exactly as the fingers' own maps: :func:`sphere_voxels` puts
-    them on the same lattice), and finger f's interior sample nearest to the voxel's
-    centre (-1 off its map).  One lookup answers for every finger."""
+    them on the same lattice), finger f's interior sample nearest to the voxel's centre
+    (-1 off its map) and that sample's closing direction (zero off its map).  One lookup
+    answers for every finger."""
 
     origin: np.ndarray  # (3,) centre of voxel (0, 0, 0), frame G
     resolution: float  # m
     bits: np.ndarray  # (nx, ny, nz) uint32
-    nearest: np.ndarray  # (n_fingers, nx, ny, nz) int32
+    nearest: np.ndarray  # (n_fingers, nx * ny * nz) int32
+    closing: np.ndarray  # (n_fingers, nx * ny * nz, 3) float32, unit or zero, frame G
 
-    def _flat(self, p_G: np.ndarray) -> np.ndarray:
+    def cells(self, p_G: np.ndarray) -> np.ndarray:
         """Flat index into the maps' one-voxel border of each point (n, 3) in G: points
         off the map land on the border, which holds no finger."""
         shape = np.array(self.bits.shape)
@@ -111,13 +113,13 @@ class HandVoxels:
 
     def lookup(self, p_G: np.ndarray) -> np.ndarray:
         """The finger bits of the voxel of each point (n, 3) in G, 0 off the map (n,)."""
-        return self.bits.ravel()[self._flat(p_G)]
+        return self.bits.ravel()[self.cells(p_G)]
 
     def nearest_sample(self, finger: int, ws: FingerWorkspace, p_G: np.ndarray) -> np.ndarray:
         """Index of a finger's interior sample near each point (n, 3) in G: the one nearest
         to its voxel's centre (within half a voxel diagonal of the point's own nearest),
         the kd-tree's answer off the finger's map (n,)."""
-        out = self.nearest[finger].ravel()[self._flat(p_G)].astype(np.intp)
+        out = self.nearest[finger][self.cells(p_G)].astype(np.intp)
         off = out < 0
         if off.any():
             out[off] = ws.tree.query(p_G[off])[1]
@@ -126,8 +128,8 @@ class HandVoxels:
 
 def hand_voxels(fingers: tuple[SphereVoxels, ...], workspaces: tuple[FingerWorkspace, ...]) -> HandVoxels:
     """The fingers' maps (on one lattice, of one resolution) as one map of finger bits,
-    with each finger's nearest interior sample per voxel of its map, and a border of one
-    empty voxel all round."""
+    with each finger's nearest interior sample per voxel of its map and its closing
+    direction, and a border of one empty voxel all round."""
     res = fingers[0].resolution
     lo = np.rint(np.min([v.origin for v in fingers], axis=0) / res).astype(int) - 1
     hi = np.rint(np.max([v.origin / res + v.index.shape for v in fingers], axis=0)).astype(int) + 1
@@ -141,7 +143,12 @@ def hand_voxels(fingers: tuple[SphereVoxels, ...], workspaces: tuple[FingerWorks
         if len(ijk) and len(ws.samples):
             block = nearest[f, a[0]:b[0], a[1]:b[1], a[2]:b[2]]
             block[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = ws.tree.query(v.origin + res * ijk)[1]
-    return HandVoxels(lo * res, res, bits, nearest)
+    nearest = nearest.reshape(len(fingers), -1)
+    closing = np.zeros((*nearest.shape, 3), dtype=np.float32)
+    for f, ws in enumerate(workspaces):
+        on = nearest[f] >= 0
+        closing[f, on] = ws.sample_closing[nearest[f, on]]
+    return HandVoxels(lo * res, res, bits, nearest, closing)
 
 
 def sphere_voxels(ws: "FingerWorkspace", inflate: float, resolution: float = 0.002) -> SphereVoxels:

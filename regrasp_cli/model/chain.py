@@ -35,6 +35,7 @@ class Chain:
     dofs: np.ndarray  # (d,) indices in the robot's q of the values that drive the chain
     A: np.ndarray  # (n, d)
     b: np.ndarray  # (n,)
+    joints: tuple[int, ...] = ()  # (n,) the pinocchio joint ids, root first
 
     def values(self, q_dofs: np.ndarray) -> np.ndarray:
         """Joint values (B, n) of the chain for ``q_dofs`` (B, d)."""
@@ -111,7 +112,8 @@ def read_chain(robot: Robot, reference_frame: int, tip_frame: int, dofs: np.ndar
         else:
             b[k] = q[i]
     X_RP = inverse(model.frames[reference_frame].placement.homogeneous)
-    return Chain(X_RP, placements, axes, prismatic, model.frames[tip_frame].placement.homogeneous, dofs, A, b)
+    return Chain(X_RP, placements, axes, prismatic, model.frames[tip_frame].placement.homogeneous, dofs, A, b,
+                 tuple(joints))
 
 
 def tip_frames_and_jacobian(chain: Chain, q_dofs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

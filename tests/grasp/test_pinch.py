@@ -51,7 +51,8 @@ def test_tip_pairs_close_towards_each_other():
     rng = np.random.default_rng(0)
     thumb = _workspace(rng.uniform(-0.05, 0.05, (100, 3)), np.array([1.0, 0.0, 0.0]))
     finger = _workspace(rng.uniform(-0.05, 0.05, (100, 3)), np.array([-1.0, 0.0, 0.0]))
-    a, b = tip_pairs(thumb, finger, rng)
+    ia, ib = tip_pairs(thumb, finger, rng)
+    a, b = thumb.samples[ia], finger.samples[ib]
     assert len(a) > 100
     u = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
     assert np.all(u[:, 0] > 0.3)
@@ -71,12 +72,12 @@ def test_pinch_frames_put_the_tips_on_the_targets():
     p2 = p1 + [0.03, 0, 0]
     n1 = np.tile([-1.0, 0, 0], (k, 1))
     p1, p2, n1 = p1 @ R_O.T, p2 @ R_O.T, n1 @ R_O.T
-    X, pair, which = pinch_frames(thumb, [finger], (r, [r]), p1, n1, p2, -n1, rng, rolls=4)
-    assert np.array_equal(pair, np.repeat(np.arange(k), 4)) and np.all(which == 0)
+    X, pair, which, _, _ = pinch_frames(thumb, [finger], (r, [r]), p1, n1, p2, -n1, rng, rolls=4)
+    assert np.array_equal(pair, np.tile(np.arange(k), 4)) and np.all(which == 0)
     assert X.shape == (4 * k, 4, 4)
     c1, c2 = p1 + r * n1, p2 - r * n1  # the fingertip centres wanted
     for j in range(k):
-        for x in X[4 * j:4 * j + 4]:
+        for x in X[pair == j]:
             assert np.allclose(x[:3, :3] @ x[:3, :3].T, np.eye(3), atol=1e-9)
             t = np.linalg.inv(x)  # O -> G
             a_G = c1[j] @ t[:3, :3].T + t[:3, 3]

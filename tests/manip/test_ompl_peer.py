@@ -42,7 +42,7 @@ from regrasp_cli.validate import collision_issues  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
-GRASP_TARGET = 20  # as tests/manip/test_online.py: the same cached lists
+GRASP_TARGET = 40  # as tests/manip/test_online.py: the same cached lists
 PLAN_SEED = 0
 NO_CLOCK = float("inf")  # tests stop on the iteration budget only, never on the wall clock
 

@@ -50,7 +50,7 @@ from regrasp_cli.validate import collision_issues
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
-GRASP_TARGET = 20  # grasps per hand: small lists (~3 s per hand), as `plan --grasp-target 20`
+GRASP_TARGET = 40  # grasps per hand: small lists (~3 s per hand), as `plan --grasp-target 40`
 POSE_TOL = (0.001, 0.01)  # m, rad
 QUERIES = ("grasp", "carry", "place", "rest")  # the hand-over's transit and transfer queries, in plan order
 
