@@ -210,14 +210,19 @@ def _with_hints(hints: Hints, opposing: bool, finger: int, live: np.ndarray, X_O
                 r_tip: float, fl: np.ndarray, slot: np.ndarray, near: np.ndarray, cand_p: np.ndarray,
                 cand_n: np.ndarray) -> tuple[np.ndarray, ...]:
     """The candidate rows (frame in ``live``, seed, point, normal in O) with each hinted
-    contact of this finger first in its frame."""
+    contact of this finger first in its frame, seeded from the hint's workspace sample (the
+    sample nearest to the target may sit on a joint limit, with the target beyond it)."""
     hinted = np.flatnonzero(opposing | (hints.finger[live] == finger))
     hp = (hints.p1 if opposing else hints.p2)[live[hinted]]
     hn = (hints.n1 if opposing else hints.n2)[live[hinted]]
+    seed = (hints.thumb_sample if opposing else hints.finger_sample)[live[hinted]]
     X = X_OG[live[hinted]]
     tip_G = np.einsum("bji,bj->bi", X[:, :3, :3], hp + r_tip * hn - X[:, :3, 3])
+    unknown = seed < 0
+    if unknown.any():
+        seed[unknown] = ws.tree.query(tip_G[unknown])[1]
     fl, slot = np.concatenate([hinted, fl]), np.concatenate([np.full(len(hinted), -1), slot])
-    near = np.concatenate([ws.tree.query(tip_G)[1] if len(hinted) else np.zeros(0, np.intp), near])
+    near = np.concatenate([seed, near])
     order = np.lexsort((slot, fl))
     return fl[order], near[order], np.concatenate([hp, cand_p])[order], np.concatenate([hn, cand_n])[order]
 

@@ -476,11 +476,11 @@ def test_a_one_iteration_rrt_budget_fails_in_a_query(problem, lists, monkeypatch
     assert out.phases == () and out.grasps == ()
     # the stages before the queries succeeded; the transition named is the first query (in
     # plan order) that failed, each query up to it made one RRT-Connect call per attempt,
-    # and every attempt failed (as many as there were double grasps with an exchange, up
-    # to key_attempts: the small lists give 2)
+    # and every attempt failed (one per double grasp with an exchange, with the arms alone,
+    # then one per double grasp leaning, up to key_attempts: the small lists give 2 or more)
     attempts = out.counts["key_attempts"]
     assert 2 <= attempts <= OnlineOptions().key_attempts
-    assert out.counts["double_grasps"] >= attempts
+    assert 2 * out.counts["double_grasps"] >= attempts  # each with the arms alone, then leaning
     assert len(exchanges) >= attempts
     assert all(dg is not None and ex is not None for dg, ex, _ in exchanges[:attempts])
     assert f"the last of {attempts} double grasps" in out.failure.reason
