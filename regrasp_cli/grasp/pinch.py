@@ -26,30 +26,14 @@ from regrasp_cli.spatial import rotation_aligning
 
 PAIR_SAMPLES = 400  # workspace samples per finger from which tip pairs are drawn
 CLOSING_COS = 0.3  # both fingertips close towards each other at least this squarely
-LIMIT_MARGIN = 0.05  # a tip pair's samples keep this share of each joint's range from its limits
-
-
-def _off_the_limits(ws: FingerWorkspace) -> np.ndarray:
-    """Indices of the interior samples whose every joint is more than :data:`LIMIT_MARGIN`
-    of its range from both ends (all of them when none is)."""
-    q = ws.sample_q
-    if not len(q):
-        return np.arange(0)
-    lo, hi = q.min(axis=0), q.max(axis=0)
-    m = LIMIT_MARGIN * (hi - lo)
-    inside = np.flatnonzero(np.all((q > lo + m) & (q < hi - m) | (hi - lo <= 0), axis=1))
-    return inside if len(inside) else np.arange(len(q))
 
 
 def tip_pairs(thumb: FingerWorkspace, finger: FingerWorkspace, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Pairs of interior samples (thumb, finger), as sample indices (m,) of each, whose
     fingertip centres close towards each other, drawn from up to :data:`PAIR_SAMPLES`
-    samples of each finger off its joint limits: a sample at a limit often has the
-    fingertip target a millimetre beyond it out of reach (on the statuette, the thumb's
-    IK failed from 44 % of such pinch frames)."""
-    pool_t, pool_f = _off_the_limits(thumb), _off_the_limits(finger)
-    it = rng.choice(pool_t, size=min(PAIR_SAMPLES, len(pool_t)), replace=False)
-    jf = rng.choice(pool_f, size=min(PAIR_SAMPLES, len(pool_f)), replace=False)
+    samples of each finger."""
+    it = rng.choice(len(thumb.samples), size=min(PAIR_SAMPLES, len(thumb.samples)), replace=False)
+    jf = rng.choice(len(finger.samples), size=min(PAIR_SAMPLES, len(finger.samples)), replace=False)
     a, b = thumb.samples[it], finger.samples[jf]
     u = b[None] - a[:, None]  # (nt, nf, 3) thumb -> finger
     d = np.linalg.norm(u, axis=2)
