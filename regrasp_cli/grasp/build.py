@@ -301,7 +301,7 @@ def _context(scene: Path, cache_dir: Path, hand: str, options: BuildOptions) -> 
                                 (geometry.width_closed, geometry.width_open), options.grasp.antipodal_samples, rng)
         return _Search(problem, surface, geometry, hm, rho, jaw_frames(geometry, pairs[0], pairs[2], rng), options)
     ws = hand_workspace(robot, hand, options.workspace, cache_dir)
-    hm.voxels(ws), hm.chains(), hm.sample_probes(ws)  # built here, so that forked workers inherit them
+    hm.voxels(ws), hm.chains(), hm.probes(), hm.palm_probes()  # built here, so that forked workers inherit them
     frames = grasp_frames(problem.object.mesh.bounds, options.grasp.n_positions, options.grasp.n_orientations)
     distance = distance_grid(_dense(problem, surface, options.seed), DISTANCE_MARGIN)
     return _Search(problem, surface, ws, hm, rho, frames, options, None, distance)

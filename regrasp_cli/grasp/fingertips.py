@@ -28,11 +28,10 @@ Most exact checks used to fail (on a YCB can, 125,000 of 153,000: a middle or pr
 phalanx through the object).  With the object's signed-distance grid
 (:class:`.surface.DistanceGrid`), spheres inside the palm's and phalanges' geometries
 (:class:`.single.LinkProbes`) rule the hopeless ones out first, a few array lookups each:
-a frame whose palm (or, for a pinch frame, whose pinching fingers at their workspace
-samples) lies in the object is not searched; a candidate whose phalanges would, at the
-nearest workspace posture, goes after the others; an IK solution whose phalanges do is
-not checked.  The grid is an estimate within a few millimetres, so it only decides what
-is tried, in which order.
+a frame whose palm lies in the object is not searched, and an IK solution whose phalanges
+do is not checked.  The grid is an estimate within a few millimetres, so it only decides
+what is tried, not how candidates rank (ranking by it changed which grasps a list holds,
+and cups lost the rim pinches their hand-overs need).
 
 A frame's result does not depend on the other frames of its batch.  Verdicts are exact:
 a contact needs the fingertip centre within ``ik_tolerance`` of its target, collisions
@@ -53,9 +52,7 @@ from regrasp_cli.model.chain import Chain, batch_dls
 
 FACING_COS = 0.2  # a candidate's normal faces the closing fingertip at least this squarely
 ALIGN_WEIGHT = 4.0  # weight of Nguyen's two-contact condition against the thumb (ranking)
-POOL = 3  # candidates looked at per one kept, for link spheres buried in the object
-BURIED = 0.003  # m: a link sphere deeper than this in the object puts its candidate last
-SKIP_DEPTH = 0.001  # m: a link sphere deeper than this in the object: not worth the exact check
+SKIP_DEPTH = 0.002  # m: a link sphere deeper than this in the object: not worth the exact check
 
 
 @dataclass(frozen=True)
@@ -101,9 +98,7 @@ def batch_ik(chain: Chain, lower: np.ndarray, upper: np.ndarray, Q0: np.ndarray,
 
 def _candidates(voxels: HandVoxels, finger: int, ws: FingerWorkspace, inside: tuple[np.ndarray, np.ndarray],
                 surface: Surface, in_G: tuple[np.ndarray, np.ndarray, np.ndarray], X_OG: np.ndarray, r_tip: float,
-                anchor: tuple[np.ndarray, np.ndarray] | None, limit: int,
-                probes: tuple[LinkProbes, np.ndarray] | None = None,
-                distance: DistanceGrid | None = None) -> tuple[np.ndarray, ...]:
+                anchor: tuple[np.ndarray, np.ndarray] | None, limit: int) -> tuple[np.ndarray, ...]:
     """Contact candidates of one finger in every frame X_OG (F, 4, 4) of a batch, best
     first per frame.
 
@@ -116,23 +111,16 @@ def _candidates(voxels: HandVoxels, finger: int, ws: FingerWorkspace, inside: tu
     its ``anchor`` contact (points, normals (F, 3), frame O): Nguyen's condition for two
     contacts, the line joining them inside both friction cones.  The paper tries the
     spheres biggest first; ranking every point in the spheres gave 1.4-1.6x more
-    force-closure grasps per frame (docs/DESIGN-NOTES.md).
-
-    With ``probes`` (the finger's link spheres and their centres at each workspace sample,
-    :meth:`.single.HandModel.sample_probes`) and the object's ``distance`` grid, the best
-    :data:`POOL` x ``limit`` of a frame are looked at again: those whose nearest workspace
-    posture buries a link sphere more than :data:`BURIED` in the object go after the others
-    (most would collide: the exact check still decides).  Returns, per candidate row, its
+    force-closure grasps per frame (docs/DESIGN-NOTES.md).  Returns, per candidate row, its
     frame (c,), surface sample (c,), nearest workspace sample (c,) and slot in its frame's
     order (c,), at most ``limit`` rows per frame, rows sorted by (frame, slot)."""
     fi, si = inside
     points_G, normals_G, at = in_G
     n_G = normals_G[at[fi], si]
     tips = points_G[at[fi], si] + r_tip * n_G
-    cells = voxels.cells(tips)
-    facing = -np.einsum("ij,ij->i", n_G, voxels.closing[finger][cells])  # zero off the finger's map
+    facing = -np.einsum("ij,ij->i", n_G, voxels.closing[finger][voxels.cells(tips)])  # zero off the finger's map
     keep = np.flatnonzero(facing > FACING_COS)
-    fi, si, rank, tips, cells = fi[keep], si[keep], facing[keep], tips[keep], cells[keep]
+    fi, si, rank, tips = fi[keep], si[keep], facing[keep], tips[keep]
     if anchor is not None:
         a_p, a_n = anchor[0][fi], anchor[1][fi]
         p, n = surface.points[si], surface.normals[si]
@@ -140,70 +128,38 @@ def _candidates(voxels: HandVoxels, finger: int, ws: FingerWorkspace, inside: tu
         u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-12)
         rank = rank + ALIGN_WEIGHT * (-np.einsum("ij,ij->i", n, u) + np.einsum("ij,ij->i", u, a_n))
     order = np.lexsort((-rank, fi))  # stable: ties keep the surface order, as the one-frame search
-    fi, si, tips, cells = fi[order], si[order], tips[order], cells[order]
-    slot = _slots(fi)
-    if probes is not None and distance is not None and len(probes[0].radii):
-        pool = np.flatnonzero(slot < POOL * limit)
-        fi, si, tips, cells, slot = fi[pool], si[pool], tips[pool], cells[pool], slot[pool]
-        near = voxels.nearest[finger][cells]
-        c_O = np.einsum("nij,npj->npi", X_OG[fi, :3, :3], probes[1][near]) + X_OG[fi, None, :3, 3]
-        buried = probes[0].depth(c_O, distance) > BURIED
-        order = np.lexsort((slot, buried, fi))
-        fi, si, tips = fi[order], si[order], tips[order]
-        slot = _slots(fi)
+    fi, si, tips = fi[order], si[order], tips[order]
+    slot = np.arange(len(fi)) - np.searchsorted(fi, fi, side="left")
     top = slot < limit
     near = ws.tree.query(tips[top])[1] if top.any() else np.zeros(0, np.intp)  # the seeds: the nearest samples
     return fi[top], si[top], near, slot[top]
 
 
-def _buried(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], X_OG: np.ndarray, hints: Hints | None,
-            distance: DistanceGrid | None) -> np.ndarray:
-    """Which frames X_OG (F, 4, 4) bury the palm in the object, or, with ``hints``, the
-    hinted fingers at their workspace samples (the pinch frames: most turns about a pair's
-    axis put the palm or a phalanx through the object), by more than :data:`SKIP_DEPTH`
-    (link spheres, :class:`.single.LinkProbes`, in the object's ``distance`` grid) (F,).
-    Not worth a search; the others still get every exact check."""
+def _buried(hm: HandModel, X_OG: np.ndarray, distance: DistanceGrid | None) -> np.ndarray:
+    """Which frames X_OG (F, 4, 4) bury the palm's spheres (:meth:`.single.HandModel.palm_probes`)
+    deeper than :data:`SKIP_DEPTH` in the object, by its ``distance`` grid (F,): not worth
+    a search.  (Doing the same for a pinch frame's pinching fingers at their workspace
+    samples lost the rim pinches a cup needs: 1 of 8 tuning runs solved against 6.)"""
     out = np.zeros(len(X_OG), dtype=bool)
-    if distance is None:
-        return out
     c, r = hm.palm_probes()
-    R_T, t = X_OG[:, :3, :3].transpose(0, 2, 1), X_OG[:, None, :3, 3]
-    if len(r):
-        out |= np.max(r - distance(c @ R_T + t), axis=1) > SKIP_DEPTH
-    if hints is not None:
-        probes, at = hm.probes(), hm.sample_probes(workspaces)
-        thumb = hm.hand.opposing
-        for f in np.unique(hints.finger[hints.finger >= 0]):
-            rows = np.flatnonzero((hints.finger == f) & ~out)
-            for g, sample in ((thumb, hints.thumb_sample), (f, hints.finger_sample)):
-                if len(rows) and len(probes[g].radii):
-                    depth = probes[g].depth(at[g][sample[rows]] @ R_T[rows] + t[rows], distance)
-                    out[rows[depth > SKIP_DEPTH]] = True
-    return out
+    if distance is None or not len(r):
+        return out
+    return np.max(r - distance(c @ X_OG[:, :3, :3].transpose(0, 2, 1) + X_OG[:, None, :3, 3]), axis=1) > SKIP_DEPTH
 
 
-def _check_order(probes: LinkProbes, chain: Chain, Q: np.ndarray, ok: np.ndarray, b: np.ndarray, X_OG: np.ndarray,
-                 distance: DistanceGrid | None) -> np.ndarray:
+def _worth_checking(probes: LinkProbes, chain: Chain, Q: np.ndarray, ok: np.ndarray, b: np.ndarray,
+                    X_OG: np.ndarray, distance: DistanceGrid | None) -> np.ndarray:
     """The rows of the IK solutions ``Q`` (c, d) of one finger whose exact collision check
-    is worth making, in order: converged (``ok`` (c,)); with the object's ``distance``
-    grid, those whose link spheres (``probes``, posed by the solution in the frame ``b``
-    (c,) of each row) lie clear of the object first and those buried deeper than
-    :data:`SKIP_DEPTH` not at all (of ~80,000 such checks on a YCB can, 99 % collided);
-    otherwise in row order."""
+    is worth making, in row order: converged (``ok`` (c,)) and, with the object's
+    ``distance`` grid, not burying a link sphere (``probes``, posed by the solution in the
+    frame ``b`` (c,) of each row) deeper than :data:`SKIP_DEPTH` in it (on a YCB can, 99 %
+    of the exact checks of such solutions collided)."""
     rows = np.flatnonzero(ok)
     if distance is None or not len(rows) or not len(probes.radii):
         return rows
     X = X_OG[b[rows]]
     c_O = np.einsum("nij,npj->npi", X[:, :3, :3], probes.centres(chain.forward(Q[rows])[0])) + X[:, None, :3, 3]
-    depth = probes.depth(c_O, distance)
-    keep = depth <= SKIP_DEPTH
-    rows, depth = rows[keep], depth[keep]
-    return rows[np.lexsort((rows, depth > 0, b[rows]))]
-
-
-def _slots(fi: np.ndarray) -> np.ndarray:
-    """Each row's rank within its frame, for rows sorted by frame ``fi`` (c,)."""
-    return np.arange(len(fi)) - np.searchsorted(fi, fi, side="left")
+    return rows[probes.depth(c_O, distance) <= SKIP_DEPTH]
 
 
 def _with_hints(hints: Hints, opposing: bool, finger: int, live: np.ndarray, X_OG: np.ndarray, ws: FingerWorkspace,
@@ -251,7 +207,7 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
     stats = {"contacts": 0, "ik": 0, "collisions": 0, "palm": 0, "few_contacts": 0, "hand_collision": 0,
              "not_force_closure": 0}
     live = []
-    buried = _buried(hm, workspaces, X_OG, hints, distance)
+    buried = _buried(hm, X_OG, distance)
     stats["buried"] = int(buried.sum())
     for b in np.flatnonzero(~buried):  # the palm inside the object: no grasp from this frame
         hm.set_object(X_OG[b])
@@ -270,7 +226,7 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
     t_GO = -np.einsum("bij,bj->bi", R_GO, X_OG[:, :3, 3])
     # which fingers' workspaces hold each surface sample, in every live frame: (F_live, S)
     voxels = hm.hand_voxels(workspaces)
-    probes, at_samples = hm.probes(), hm.sample_probes(workspaces)
+    probes = hm.probes()
     points_G = surface.points @ X_OG[live, :3, :3] + t_GO[live, None]  # (F_live, S, 3)
     normals_G = surface.normals @ X_OG[live, :3, :3]
     bits = voxels.lookup(points_G.reshape(-1, 3)).reshape(len(live), len(surface.points))
@@ -284,7 +240,7 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
         anchor = None if f == thumb else (points[live, thumb], normals[live, thumb])
         inside = np.nonzero(bits[row[live]] & np.uint32(1 << f))
         fl, si, near, slot = _candidates(voxels, f, ws, inside, surface, (points_G, normals_G, row[live]), X_OG[live],
-                                         r_tip, anchor, options.candidates_per_finger, (probes[f], at_samples[f]), distance)
+                                         r_tip, anchor, options.candidates_per_finger)
         cand_p, cand_n = surface.points[si], surface.normals[si]
         if hints is not None:
             fl, near, cand_p, cand_n = _with_hints(hints, f == thumb, f, live, X_OG, ws, r_tip, fl, slot, near,
@@ -295,7 +251,7 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
         Q, ok, J = batch_ik(chains[f], hm.robot.lower[idx], hm.robot.upper[idx], ws.sample_q[near], target_G,
                             options.ik_iterations, options.ik_tolerance)
         stats["ik"] += int(ok.sum())
-        for k in _check_order(probes[f], chains[f], Q, ok, b, X_OG, distance):
+        for k in _worth_checking(probes[f], chains[f], Q, ok, b, X_OG, distance):
             frame = b[k]
             if f in placed[frame]:
                 continue

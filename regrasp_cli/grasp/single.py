@@ -158,7 +158,6 @@ class HandModel:
         self._voxels: tuple[int, tuple[SphereVoxels, ...], HandVoxels] | None = None
         self._chains: tuple[Chain, ...] | None = None
         self._probes: tuple[LinkProbes, ...] | None = None
-        self._sample_probes: tuple[int, tuple[np.ndarray, ...]] | None = None
         self._palm_probes: tuple[np.ndarray, np.ndarray] | None = None
         self._object_at: bytes | None = None
         self._pair_memo: dict[tuple[frozenset[int], int | None], list[int]] = {}
@@ -213,15 +212,6 @@ class HandModel:
                 radii.append(r)
         self._palm_probes = (np.concatenate(centres), np.concatenate(radii))
         return self._palm_probes
-
-    def sample_probes(self, workspaces: tuple[FingerWorkspace, ...]) -> tuple[np.ndarray, ...]:
-        """Per finger, its :class:`LinkProbes` centres (m, P, 3) in G at each interior sample of
-        its workspace (built on first use)."""
-        if self._sample_probes is None or self._sample_probes[0] != id(workspaces):
-            self._sample_probes = (id(workspaces), tuple(
-                lp.centres(chain.forward(ws.sample_q)[0]) if len(ws.sample_q) else np.zeros((0, len(lp.radii), 3))
-                for lp, chain, ws in zip(self.probes(), self.chains(), workspaces)))
-        return self._sample_probes[1]
 
     def hand_voxels(self, workspaces: tuple[FingerWorkspace, ...]) -> HandVoxels:
         """The fingers' voxel maps as one map of finger bits (:class:`.workspace.HandVoxels`)."""

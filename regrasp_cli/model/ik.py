@@ -161,16 +161,18 @@ def finger_ik(robot: Robot, hand: str, finger: int, p_WT: np.ndarray, q_seed: np
 
 
 def arm_reachable(robot: Robot, hand: str, X_WG: np.ndarray, rng: np.random.Generator, seeds: int = 4,
-                  options: IKOptions = IKOptions(max_iters=60, tol_position=1e-3, tol_rotation=1e-2)) -> np.ndarray:
+                  options: IKOptions = IKOptions(max_iters=60, tol_position=1e-3, tol_rotation=1e-2),
+                  torso: bool = True) -> np.ndarray:
     """Which of the grasp-frame poses X_WG (B, 4, 4) the torso and the hand's arm together
     reach (B,) bool: a necessary condition of any arm IK of the hand, the torso fixed or
     leaning, checked for all poses at once by a batched DLS (:func:`.chain.batch_pose_ik`)
     from the rest configuration and ``seeds`` random postures (drawn from ``rng``), the
-    other joints at rest.  Being a local method from a few seeds it can miss a reachable
-    pose (1 grasp in 9 found by the full search on the default scene): it orders and prunes
-    candidates before the costly search, it does not certify."""
+    other joints at rest.  Without ``torso``, the arm alone, the torso at rest.  Being a
+    local method from a few seeds it can miss a reachable pose (1 grasp in 9 found by the
+    full search on the default scene): it orders and prunes candidates before the costly
+    search, it does not certify."""
     h = robot.hands[hand]
-    dofs = np.concatenate([robot.groups["torso"], h.arm_idx])
+    dofs = np.concatenate([robot.groups["torso"], h.arm_idx]) if torso else np.asarray(h.arm_idx)
     chain = read_chain(robot, 0, h.grasp_frame, dofs, robot.q_rest)
     lo, hi = robot.lower[dofs], robot.upper[dofs]
     B = len(X_WG)
