@@ -30,7 +30,7 @@ from regrasp_cli.grasp.build import (
     remove_duplicates,
 )
 from regrasp_cli.grasp.quality import combine_scores, force_closure, primitive_wrenches
-from regrasp_cli.grasp.single import Grasp, GraspOptions
+from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel
 from regrasp_cli.grasp.surface import build_surface, sampling_step
 from regrasp_cli.model.collision import ObjectPlacement, collision_world
 from regrasp_cli.model.robot import Kinematics
@@ -214,20 +214,36 @@ def test_no_hand_object_collision_but_at_the_fingertips(problem, glist):
     assert not bad, f"hand links in the object (grasp, link): {bad}"
 
 
-def test_every_grasp_is_force_closure(problem, glist, surface):
-    """Force closure recomputed from the stored contacts, the scene friction, the surface
-    mass centre and the torque scale of build.py; epsilon as stored."""
-    h = problem.robot.hands[HAND]
-    mu = problem.spec.object.friction
-    rho = float(np.linalg.norm(problem.object.extents) / 2)
-    for g in range(len(glist)):
-        c = glist.in_contact[g]
-        W = primitive_wrenches(glist.points[g][c], glist.normals[g][c], mu, surface.mass_centre, rho,
-                               contact=h.spec.contact, n_edges=OPTIONS.grasp.cone_edges)
-        is_fc, eps = force_closure(W)
-        assert is_fc, g
-        assert eps > 0.0
-        np.testing.assert_allclose(eps, glist.scores[g, 0], rtol=1e-9, atol=1e-12)
+
+def test_closed_hand_does_not_collide_with_itself(problem, glist):
+    """The fingertips may sink into the object, never into another finger or the palm: at
+    every stored grasp's finger values the robot's own collision world (the planner's and
+    the validator's, no tolerance between links) finds no pair colliding."""
+    world = collision_world(problem.robot, (), problem.disabled.links(), None, problem.collision_options)
+    hits = [(g, pairs) for g in range(len(glist)) if (pairs := world.colliding_pairs(_q(problem, glist.finger_q[g])))]
+    assert not hits, f"grasps whose hand collides with itself: {hits}"
+
+
+def test_hand_model_self_collision_is_the_robot_worlds(problem):
+    """The grasp search's hand model judges finger-finger and finger-palm contact as the
+    robot's collision world does (its fingertips are eroded only against the object): the
+    same verdict on 300 random finger postures, the object far away, some of them
+    colliding (abductions towards each other, tips folded together)."""
+    robot = problem.robot
+    h = robot.hands[HAND]
+    hm = HandModel(robot, HAND, problem.object.mesh, problem.disabled.links(), problem.spec.planning.contact_tolerance)
+    far = np.eye(4)
+    far[:3, 3] = 10.0
+    hm.set_object(far)
+    world = collision_world(robot, (), problem.disabled.links(), None, problem.collision_options)
+    rng = np.random.default_rng(7)
+    verdicts = []
+    for _ in range(300):
+        q = _q(problem, rng.uniform(robot.lower[h.idx], robot.upper[h.idx]))
+        verdicts.append((hm.collides(q, set(range(len(h.finger_idx))), None), not world.is_free(q)))
+    verdicts = np.array(verdicts)
+    assert 10 <= verdicts[:, 1].sum() <= 290, "the sample should hold both colliding and free postures"
+    assert np.array_equal(verdicts[:, 0], verdicts[:, 1])
 
 
 def test_scores_sorted_and_consistent(problem, glist, surface):
