@@ -160,40 +160,50 @@ def with_fingers(scratch: Scratch, q: np.ndarray, hand: str, values: np.ndarray)
     return out
 
 
-def preshapes(scratch: Scratch, grasps: GraspList, k: int):
+def preshapes(scratch: Scratch, grasps: GraspList, k: int, up_O: np.ndarray | None = None):
     """Pre-shapes of grasp ``k``, lazily (finger values, (n_hand_joints,)): opened from
     closed towards open, most open first; for a fingertip hand, then every fingertip
     backed off its contact along the surface normal (finger IK), farthest first: opening
     a low pinch towards the open hand can swing a finger into the support, backing off
-    moves each tip straight out of its contact."""
+    moves each tip straight out of its contact.  With ``up_O`` (3,), the object resting on
+    a support whose upward direction is that (frame O), the backed-off tips then also rise
+    :data:`PRESHAPE_LIFT` off it: a pinch on a flat object rests its tips on the support
+    (within the contact tolerance), where backing off along a level normal leaves them."""
     h = scratch.problem.robot.hands[grasps.hand]
     closed = grasps.finger_q[k]
     for a in scratch.options.preshape:
         yield closed + a * (h.open - closed)
-    for d in scratch.options.backoff if h.kind == "fingertips" else ():
-        key = (grasps.hand, k, d)  # computed once per run, and only when the openings above collide
-        if key not in scratch.backed_off:
-            scratch.backed_off[key] = _backed_off(scratch, grasps, k, d)
-        if scratch.backed_off[key] is not None:
-            yield scratch.backed_off[key]
+    lifts = (None,) if up_O is None else (None, PRESHAPE_LIFT * np.asarray(up_O, dtype=float))
+    for lift in lifts if h.kind == "fingertips" else ():
+        for d in scratch.options.backoff:
+            # computed once per run, and only when the openings above collide
+            key = (grasps.hand, k, d, None if lift is None else np.round(lift, 9).tobytes())
+            if key not in scratch.backed_off:
+                scratch.backed_off[key] = _backed_off(scratch, grasps, k, d, lift)
+            if scratch.backed_off[key] is not None:
+                yield scratch.backed_off[key]
 
 
 _BACK_OFF_IK = IKOptions(restarts=0, max_iters=30)  # from the closed values only: no random restart
+PRESHAPE_LIFT = 0.005  # m: backed-off fingertips rise this far off a support (more than the contact tolerance)
 
 
-def _backed_off(scratch: Scratch, grasps: GraspList, k: int, distance: float) -> np.ndarray | None:
+def _backed_off(scratch: Scratch, grasps: GraspList, k: int, distance: float,
+                lift_O: np.ndarray | None = None) -> np.ndarray | None:
     """Finger values (n_hand_joints,) of grasp ``k`` with every fingertip in contact moved
     out of its contact along the surface normal, towards ``distance`` (m) out and at least
-    half of it (finger IK from the closed values, no restart: a joint limit may stop a
-    finger short of the exact target), or None when a finger cannot back off that far."""
+    half of it, and by ``lift_O`` (3,) (m, frame O) (finger IK from the closed values, no
+    restart: a joint limit may stop a finger short of the exact target), or None when a
+    finger cannot back off that far."""
     robot = scratch.problem.robot
     h = robot.hands[grasps.hand]
     q = with_fingers(scratch, robot.q_rest, grasps.hand, grasps.finger_q[k])
     X_WO = scratch.kin.fk(q, h.grasp_frame) @ inverse(grasps.X_OG[k])  # the hand where it is at rest
+    lift_W = np.zeros(3) if lift_O is None else X_WO[:3, :3] @ lift_O
     for f in np.nonzero(grasps.in_contact[k])[0]:
         r = h.spec.fingers[f].tip_radius
         p_W, n_W = X_WO[:3, :3] @ grasps.points[k, f] + X_WO[:3, 3], X_WO[:3, :3] @ grasps.normals[k, f]
-        q = finger_ik(robot, grasps.hand, int(f), p_W + (r + distance) * n_W, q, None, _BACK_OFF_IK).q
+        q = finger_ik(robot, grasps.hand, int(f), p_W + (r + distance) * n_W + lift_W, q, None, _BACK_OFF_IK).q
         if (scratch.kin.fk(q, h.tip_frames[f])[:3, 3] - p_W) @ n_W < r + distance / 2:
             return None
     return q[h.idx]
@@ -351,7 +361,8 @@ def _grasp_at(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: 
     if q_closed is None:
         return None
     q = with_fingers(scratch, q_closed, hand, robot.hands[hand].open)
-    q_pre = next((qp for qp in (with_fingers(scratch, q, hand, f) for f in preshapes(scratch, grasps, k))
+    up_O = X_WO[2, :3]  # the world's vertical in O: the support is below the object
+    q_pre = next((qp for qp in (with_fingers(scratch, q, hand, f) for f in preshapes(scratch, grasps, k, up_O))
                   if w_free.is_free(qp) and scratch.segment_free(w_touch, qp, q_closed)), None)
     if q_pre is None:
         return None

@@ -33,7 +33,7 @@ from regrasp_cli.manip.doublegrasp import cheap_order, double_grasps, environmen
 from regrasp_cli.manip.exchange import exchange_orientation, grid_nodes, wrist_path_cost
 from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, hands_collide, \
     static_geometry
-from regrasp_cli.manip.keyconf import SingleConfig, _backed_off, approach_axis, cartesian_line, preshapes, \
+from regrasp_cli.manip.keyconf import PRESHAPE_LIFT, SingleConfig, _backed_off, approach_axis, cartesian_line, preshapes, \
     shoulder, single_configuration, with_fingers, wrist
 from regrasp_cli.manip.modes import Kind
 from regrasp_cli.manip.queries import QueryStats, Roadmap, roadmap_query
@@ -289,6 +289,35 @@ def test_backed_off_preshape_moves_each_tip_straight_out_of_its_contact(problem,
                 at = [list(h.idx).index(j) for j in h.finger_idx[i]]
                 np.testing.assert_array_equal(f[at], g.finger_q[k][at])
     assert backed >= 4, backed  # many grasps can back off
+
+
+def test_lifted_preshape_raises_each_tip_off_the_support(problem, lists, single):
+    """With the support's upward direction, a backed-off tip also rises: its centre ends
+    higher along it than the plain backed-off tip's, by most of PRESHAPE_LIFT (finger IK
+    from the closed values, so not exactly), and still out of its contact."""
+    scratch, _ = single
+    robot, h, g = problem.robot, problem.robot.hands["right"], lists["right"]
+    kin = Kinematics(robot)
+    up_O = np.array([0.0, 0.0, 1.0])
+    rises = []
+    for k in range(len(g)):
+        plain = _backed_off(scratch, g, k, 0.008)
+        lifted = _backed_off(scratch, g, k, 0.008, PRESHAPE_LIFT * up_O)
+        if plain is None or lifted is None:
+            continue
+        for f in (plain, lifted):
+            q = with_fingers(scratch, robot.q_rest, "right", f)
+            X_OW = g.X_OG[k] @ inverse(kin.fk(q, h.grasp_frame))
+            tips = [X_OW[:3, :3] @ kin.fk(q, h.tip_frames[i])[:3, 3] + X_OW[:3, 3] for i in range(len(h.spec.fingers))]
+            if f is plain:
+                before = tips
+                continue
+            for i, finger in enumerate(h.spec.fingers):
+                if g.in_contact[k, i]:
+                    rises.append((tips[i] - before[i]) @ up_O)
+                    assert (tips[i] - g.points[k, i]) @ g.normals[k, i] >= finger.tip_radius + 0.004 - 1e-9
+    assert len(rises) >= 8
+    assert np.median(rises) >= 0.8 * PRESHAPE_LIFT
 
 
 def test_approach_starts_open_and_ends_preshaped_at_the_grasp_pose(problem, lists, single):
