@@ -154,13 +154,22 @@ def _overlaps(grasps: GraspList, shapes: list[HandShape]):
     return overlap
 
 
+def pairable(grasps_a: GraspList, shapes_a: list[HandShape], ks_a: np.ndarray, grasps_b: GraspList,
+             shapes_b: list[HandShape], ks_b: np.ndarray) -> np.ndarray:
+    """(len(ks_a), len(ks_b)) bool: which grasps ``ks_a`` of one hand's list and ``ks_b`` of
+    the other's hold the object together without the hands colliding (hand shapes only,
+    no IK)."""
+    return np.array([[not hands_collide(shapes_a[a], grasps_a.X_OG[a], shapes_b[b], grasps_b.X_OG[b]) for b in ks_b]
+                     for a in ks_a], dtype=bool).reshape(len(ks_a), len(ks_b))
+
+
 def partners(configs: list[SingleConfig], config_list: GraspList, config_shapes: list[HandShape],
              other_list: GraspList, other_shapes: list[HandShape]) -> np.ndarray:
     """Indices of the other hand's grasps that hold the object together with at least one
-    of ``configs`` without the hands colliding (hand shapes only, no IK)."""
-    return np.array([k for k in range(len(other_list))
-                     if any(not hands_collide(config_shapes[c.grasp], config_list.X_OG[c.grasp], other_shapes[k],
-                                              other_list.X_OG[k]) for c in configs)], dtype=int)
+    of ``configs`` without the hands colliding (:func:`pairable`)."""
+    ks = np.arange(len(other_list))
+    return ks[pairable(config_list, config_shapes, np.array([c.grasp for c in configs], dtype=int), other_list,
+                       other_shapes, ks).any(axis=0)]
 
 
 def double_grasps(giver: list[SingleConfig], giver_list: GraspList, giver_shapes: list[HandShape],

@@ -291,6 +291,29 @@ def test_backed_off_preshape_moves_each_tip_straight_out_of_its_contact(problem,
     assert backed >= 4, backed  # many grasps can back off
 
 
+def test_paired_search_returns_configurations_that_pair(problem, lists, shapes, env):
+    """The pairs-first search (few pairs among the first configurations): each giver
+    configuration it returns has a grasp the taker's arm reaches at the goal that shares
+    the object with it, each taker configuration shares it with one of the giver's new
+    ones, and every configuration is collision-free, closed on the object at its end.
+    With nothing found before, on the default scene, it finds pairs (the search alone)."""
+    scratch = new_scratch(problem)
+    task = problem.spec.task
+    giver, taker = handover._paired_search(scratch, np.random.default_rng(3), lists, shapes, env, "right", ([], []),
+                                           lean=False)
+    assert giver and taker
+    reach_t = handover.workable(scratch, lists["left"], shapes["left"], task.X_WO_goal, env)[1]
+    for c in giver:
+        assert any(not hands_collide(shapes["right"][c.grasp], lists["right"].X_OG[c.grasp], shapes["left"][b],
+                                     lists["left"].X_OG[b]) for b in reach_t)
+        assert static_world(problem, task.X_WO_start, ("right",)).colliding_pairs(c.q_closed) == []
+    for c in taker:
+        assert any(not hands_collide(shapes["right"][a.grasp], lists["right"].X_OG[a.grasp], shapes["left"][c.grasp],
+                                     lists["left"].X_OG[c.grasp]) for a in giver)
+        assert static_world(problem, task.X_WO_goal, ("left",)).colliding_pairs(c.q_closed) == []
+    assert double_grasps(giver, lists["right"], shapes["right"], taker, lists["left"], shapes["left"])
+
+
 def test_lifted_preshape_raises_each_tip_off_the_support(problem, lists, single):
     """With the support's upward direction, a backed-off tip also rises: its centre ends
     higher along it than the plain backed-off tip's, by most of PRESHAPE_LIFT (finger IK
