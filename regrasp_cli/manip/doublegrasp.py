@@ -20,7 +20,10 @@
    both hands' best grasps take the same side), the taking hand's configurations are
    searched again among the grasps that can share the object with one of the giver's
    (:func:`partners`, hand shapes only), the giver's among the taker's partners, and
-   the new pairs among all configurations found come after the first ones.
+   the new pairs among all configurations found come after the first ones.  When that
+   still leaves few, pairs first: the grasps the two arms reach are paired by hand shapes
+   (:func:`pairable`), and configurations are searched for the giver's grasps with a
+   partner, then for their partners (``manip.tasks.handover``).
 """
 
 from __future__ import annotations
