@@ -93,14 +93,12 @@ class SphereVoxels:
 class HandVoxels:
     """The voxel maps of all fingers of a hand on one lattice: per voxel, bit f set when
     finger f's map holds it (exactly as the fingers' own maps: :func:`sphere_voxels` puts
-    them on the same lattice), finger f's interior sample nearest to the voxel's centre
-    (-1 off its map) and that sample's closing direction (zero off its map).  One lookup
-    answers for every finger."""
+    them on the same lattice) and the closing direction of finger f's interior sample
+    nearest to the voxel's centre (zero off its map).  One lookup answers for every finger."""
 
     origin: np.ndarray  # (3,) centre of voxel (0, 0, 0), frame G
     resolution: float  # m
     bits: np.ndarray  # (nx, ny, nz) uint32
-    nearest: np.ndarray  # (n_fingers, nx * ny * nz) int32
     closing: np.ndarray  # (n_fingers, nx * ny * nz, 3) float32, unit or zero, frame G
 
     def cells(self, p_G: np.ndarray) -> np.ndarray:
@@ -115,21 +113,11 @@ class HandVoxels:
         """The finger bits of the voxel of each point (n, 3) in G, 0 off the map (n,)."""
         return self.bits.ravel()[self.cells(p_G)]
 
-    def nearest_sample(self, finger: int, ws: FingerWorkspace, p_G: np.ndarray) -> np.ndarray:
-        """Index of a finger's interior sample near each point (n, 3) in G: the one nearest
-        to its voxel's centre (within half a voxel diagonal of the point's own nearest),
-        the kd-tree's answer off the finger's map (n,)."""
-        out = self.nearest[finger][self.cells(p_G)].astype(np.intp)
-        off = out < 0
-        if off.any():
-            out[off] = ws.tree.query(p_G[off])[1]
-        return out
-
 
 def hand_voxels(fingers: tuple[SphereVoxels, ...], workspaces: tuple[FingerWorkspace, ...]) -> HandVoxels:
     """The fingers' maps (on one lattice, of one resolution) as one map of finger bits,
-    with each finger's nearest interior sample per voxel of its map and its closing
-    direction, and a border of one empty voxel all round."""
+    with the closing direction of each finger's interior sample nearest to each voxel of
+    its map, and a border of one empty voxel all round."""
     res = fingers[0].resolution
     lo = np.rint(np.min([v.origin for v in fingers], axis=0) / res).astype(int) - 1
     hi = np.rint(np.max([v.origin / res + v.index.shape for v in fingers], axis=0)).astype(int) + 1
@@ -148,7 +136,7 @@ def hand_voxels(fingers: tuple[SphereVoxels, ...], workspaces: tuple[FingerWorks
     for f, ws in enumerate(workspaces):
         on = nearest[f] >= 0
         closing[f, on] = ws.sample_closing[nearest[f, on]]
-    return HandVoxels(lo * res, res, bits, nearest, closing)
+    return HandVoxels(lo * res, res, bits, closing)
 
 
 def sphere_voxels(ws: "FingerWorkspace", inflate: float, resolution: float = 0.002) -> SphereVoxels:
