@@ -246,6 +246,22 @@ def test_hand_model_self_collision_is_the_robot_worlds(problem):
     assert np.array_equal(verdicts[:, 0], verdicts[:, 1])
 
 
+def test_every_grasp_is_force_closure(problem, glist, surface):
+    """Force closure recomputed from the stored contacts, the scene friction, the surface
+    mass centre and the torque scale of build.py; epsilon as stored."""
+    h = problem.robot.hands[HAND]
+    mu = problem.spec.object.friction
+    rho = float(np.linalg.norm(problem.object.extents) / 2)
+    for g in range(len(glist)):
+        c = glist.in_contact[g]
+        W = primitive_wrenches(glist.points[g][c], glist.normals[g][c], mu, surface.mass_centre, rho,
+                               contact=h.spec.contact, n_edges=OPTIONS.grasp.cone_edges)
+        is_fc, eps = force_closure(W)
+        assert is_fc, g
+        assert eps > 0.0
+        np.testing.assert_allclose(eps, glist.scores[g, 0], rtol=1e-9, atol=1e-12)
+
+
 def test_scores_sorted_and_consistent(problem, glist, surface):
     scores = glist.scores
     assert np.all(np.isfinite(scores))
