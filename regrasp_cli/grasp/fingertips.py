@@ -17,8 +17,8 @@ A batch of frames goes finger by finger, so that everything that does not depend
 frame's earlier verdicts is one numpy call for all of them:
 
 * which fingers' workspaces hold each surface sample, in every frame: one lookup in one
-  voxel map of finger bits (:class:`.workspace.HandVoxels`), which also gives the seed
-  sample and the closing direction without a kd-tree query per candidate;
+  voxel map of finger bits (:class:`.workspace.HandVoxels`), which also gives the closing
+  direction without a kd-tree query per candidate;
 * finger IK (damped least squares) for every candidate of every frame at once, on the
   finger's chain in G (:mod:`model.chain`);
 * only then, frame by frame, the exact collision checks (coal, through pinocchio's
@@ -97,10 +97,9 @@ def batch_ik(chain: Chain, lower: np.ndarray, upper: np.ndarray, Q0: np.ndarray,
 
 
 def _candidates(voxels: HandVoxels, finger: int, ws: FingerWorkspace, inside: tuple[np.ndarray, np.ndarray],
-                surface: Surface, in_G: tuple[np.ndarray, np.ndarray, np.ndarray], X_OG: np.ndarray, r_tip: float,
+                surface: Surface, in_G: tuple[np.ndarray, np.ndarray, np.ndarray], r_tip: float,
                 anchor: tuple[np.ndarray, np.ndarray] | None, limit: int) -> tuple[np.ndarray, ...]:
-    """Contact candidates of one finger in every frame X_OG (F, 4, 4) of a batch, best
-    first per frame.
+    """Contact candidates of one finger in every frame of a batch, best first per frame.
 
     ``inside`` (frame (c,), surface sample (c,)): the surface samples in the voxel map of
     the finger's workspace spheres, frame by frame in surface order; ``in_G``: the samples'
@@ -172,11 +171,11 @@ def _with_hints(hints: Hints, opposing: bool, finger: int, live: np.ndarray, X_O
     hp = (hints.p1 if opposing else hints.p2)[live[hinted]]
     hn = (hints.n1 if opposing else hints.n2)[live[hinted]]
     seed = (hints.thumb_sample if opposing else hints.finger_sample)[live[hinted]]
-    X = X_OG[live[hinted]]
-    tip_G = np.einsum("bji,bj->bi", X[:, :3, :3], hp + r_tip * hn - X[:, :3, 3])
     unknown = seed < 0
-    if unknown.any():
-        seed[unknown] = ws.tree.query(tip_G[unknown])[1]
+    if unknown.any():  # a hint without its sample: the one nearest to the tip's target
+        X = X_OG[live[hinted[unknown]]]
+        tip_G = np.einsum("bji,bj->bi", X[:, :3, :3], hp[unknown] + r_tip * hn[unknown] - X[:, :3, 3])
+        seed[unknown] = ws.tree.query(tip_G)[1]
     fl, slot = np.concatenate([hinted, fl]), np.concatenate([np.full(len(hinted), -1), slot])
     near = np.concatenate([seed, near])
     order = np.lexsort((slot, fl))
@@ -199,8 +198,8 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
     for the summary, summed over the frames: contact candidates, IK successes, candidates
     colliding, frames with the palm in the object, with too few contacts, with the closed
     hand colliding, not force closure.  With ``hints``, their contacts are tried first; with
-    the object's ``distance`` grid, candidates that would bury a phalanx in it go last
-    (:func:`_candidates`)."""
+    the object's ``distance`` grid, frames that bury the palm and IK solutions that bury a
+    phalanx are not checked (:func:`_buried`, :func:`_worth_checking`)."""
     h = hm.hand
     chains = hm.chains()
     F = len(X_OG)
@@ -239,8 +238,8 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
         ws, idx, r_tip = workspaces[f], h.finger_idx[f], h.spec.fingers[f].tip_radius
         anchor = None if f == thumb else (points[live, thumb], normals[live, thumb])
         inside = np.nonzero(bits[row[live]] & np.uint32(1 << f))
-        fl, si, near, slot = _candidates(voxels, f, ws, inside, surface, (points_G, normals_G, row[live]), X_OG[live],
-                                         r_tip, anchor, options.candidates_per_finger)
+        fl, si, near, slot = _candidates(voxels, f, ws, inside, surface, (points_G, normals_G, row[live]), r_tip,
+                                         anchor, options.candidates_per_finger)
         cand_p, cand_n = surface.points[si], surface.normals[si]
         if hints is not None:
             fl, near, cand_p, cand_n = _with_hints(hints, f == thumb, f, live, X_OG, ws, r_tip, fl, slot, near,

@@ -68,7 +68,7 @@ class LinkProbes:
     """Spheres inside the link geometries of a finger but its fingertip (:func:`link_probes`),
     each hanging from a joint of the finger's chain (:mod:`model.chain`).  Where they lie in
     the object tells which finger postures bury a phalanx in it, far more cheaply than the
-    exact check, which alone decides (:mod:`.fingertips` orders the checks by it)."""
+    exact check, which alone decides (:mod:`.fingertips` skips the hopeless checks by it)."""
 
     joint: np.ndarray  # (P,) index in the chain of the joint each sphere hangs from
     p_J: np.ndarray  # (P, 3) centres in that joint's frame, m

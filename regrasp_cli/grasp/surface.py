@@ -425,8 +425,8 @@ NEIGHBOURS = 4
 class DistanceGrid:
     """An estimate of the signed distance to an object's surface (m, negative inside) on a
     voxel grid over its bounding box grown by ``margin``, frame O (:func:`distance_grid`):
-    within a few millimetres of the true distance, a ranking aid (:mod:`.fingertips`),
-    never a collision verdict."""
+    within a few millimetres of the true distance, what :mod:`.fingertips` skips hopeless
+    checks by, never a collision verdict."""
 
     origin: np.ndarray  # (3,) centre of cell (0, 0, 0)
     resolution: float  # m
@@ -476,8 +476,8 @@ def distance_grid(surface: Surface, margin: float, resolution: float = 0.002) ->
     # inside only behind every neighbour's tangent plane (a point above a rim is in front of
     # the rim's top samples, behind the wall's): by the least deep of them; outside, the
     # distance to the nearest sample
-    deepest_side = plane.max(axis=1)
-    values = np.where(deepest_side < 0, deepest_side, np.where(far, 0.0, dist[:, 0]))
+    shallowest = plane.max(axis=1)
+    values = np.where(shallowest < 0, shallowest, np.where(far, 0.0, dist[:, 0]))
     regions, _ = label(far.reshape(shape))
     border = np.unique(np.concatenate([regions[0].ravel(), regions[-1].ravel(), regions[:, 0].ravel(),
                                        regions[:, -1].ravel(), regions[:, :, 0].ravel(), regions[:, :, -1].ravel()]))

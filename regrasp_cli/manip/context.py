@@ -95,7 +95,7 @@ class Scratch:
         self.kin = Kinematics(self.problem.robot)
         self._held: dict = {}  # local planners for a held object, by hand and placement
         self.workable: dict = {}  # grasps clear of the obstacles and reached, by hand and pose (doublegrasp)
-        self.backed_off: dict = {}  # pre-shapes backed off the contacts, by hand, grasp and distance (keyconf)
+        self.backed_off: dict = {}  # pre-shapes backed off the contacts, by hand, grasp, distance and lift (keyconf)
         self.local = LocalPlanner(self.options.resolution, self.options.cartesian_step / 2,
                                   joint_reach(self.problem.robot), self.options.coarse_checks)
         self.chains = arm_chains(self.problem.robot)  # the displacement bound per class of pairs

@@ -173,13 +173,13 @@ def preshapes(scratch: Scratch, grasps: GraspList, k: int, up_O: np.ndarray | No
     closed = grasps.finger_q[k]
     for a in scratch.options.preshape:
         yield closed + a * (h.open - closed)
-    lifts = (None,) if up_O is None else (None, PRESHAPE_LIFT * np.asarray(up_O, dtype=float))
-    for lift in lifts if h.kind == "fingertips" else ():
+    ups = (None,) if up_O is None else (None, np.asarray(up_O, dtype=float))
+    for up in ups if h.kind == "fingertips" else ():
         for d in scratch.options.backoff:
             # computed once per run, and only when the openings above collide
-            key = (grasps.hand, k, d, None if lift is None else np.round(lift, 9).tobytes())
+            key = (grasps.hand, k, d, None if up is None else up.tobytes())
             if key not in scratch.backed_off:
-                scratch.backed_off[key] = _backed_off(scratch, grasps, k, d, lift)
+                scratch.backed_off[key] = _backed_off(scratch, grasps, k, d, None if up is None else PRESHAPE_LIFT * up)
             if scratch.backed_off[key] is not None:
                 yield scratch.backed_off[key]
 

@@ -332,9 +332,10 @@ def exchange_near(scratch: Scratch, rng: np.random.Generator, dg: DoubleGrasp, l
     robot, reach_rng = scratch.problem.robot, np.random.default_rng([int(rng.integers(2**31)), 39])
     reached, alone = np.ones(len(poses), dtype=bool), np.ones(len(poses), dtype=bool)
     for hand, grasps, k in ((g, lists[g], dg.giver.grasp), (t, lists[t], dg.taker.grasp)):
-        reached &= arm_reachable(robot, hand, poses @ grasps.X_OG[k], reach_rng)
+        X_WG = poses @ grasps.X_OG[k]
+        reached &= arm_reachable(robot, hand, X_WG, reach_rng)
         if not lean:  # each arm alone, the torso at rest: those the arms reach alone first
-            alone &= arm_reachable(robot, hand, poses @ grasps.X_OG[k], reach_rng, torso=False)
+            alone &= arm_reachable(robot, hand, X_WG, reach_rng, torso=False)
     order = np.flatnonzero(reached)
     order = order[np.argsort(~alone[order], kind="stable")]
     for X in poses[order][:n]:
