@@ -1,9 +1,10 @@
 """`regrasp grasps build`: the grasp list of a hand for an object (Saut et al. 2010, §IV-A).
 
 Pipeline (fingertip hands; jaws: :mod:`.jaw`): object surface model (:mod:`.surface`) -> finger workspace spheres
-(:mod:`.workspace`, Algorithm 1, cached) -> grasp frames (:mod:`.frames`: positions in
-the object's bounding box x an incremental SO(3) grid; then :mod:`.pinch` frames across
-antipodal pairs, tried only when the grid leaves the list short) -> the grasp of each frame,
+(:mod:`.workspace`, Algorithm 1, cached) -> grasp frames (contacts first: :mod:`.pinch`
+frames across antipodal pairs, those whose two hinted fingers clear the object first; then,
+when they leave the list short, the grid of :mod:`.frames`: positions in the object's
+bounding box x an incremental SO(3) grid) -> the grasp of each frame,
 a chunk of frames at a time (:mod:`.fingertips`, which skips what the object's distance
 grid shows buried: :func:`.surface.distance_grid`), chunks in parallel over forked
 processes -> force-closure filter and quality (:mod:`.quality`) -> near-duplicates removed
@@ -39,7 +40,7 @@ from regrasp_cli.grasp.pads import PadHand, pad_frames, pad_geometry, pad_grasp
 from regrasp_cli.grasp.pinch import pinch_frames
 from regrasp_cli.model.handshape import StaticGeometry, hand_hits_static, hand_inputs, hand_shapes
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
-from regrasp_cli.grasp.fingertips import Hints, grasps_for_frames
+from regrasp_cli.grasp.fingertips import Hints, grasps_for_frames, hints_clear
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel
 from regrasp_cli.grasp.surface import MAX_SAMPLES, DistanceGrid, Surface, build_surface, distance_grid, sampling_step
 from regrasp_cli.grasp.workspace import FingerWorkspace, WorkspaceOptions, hand_workspace
@@ -226,14 +227,16 @@ def _pinch_searches(context: _Search, supports: list[tuple[np.ndarray, float] | 
         # other fingers take contacts low on its rim goes through it), plus the rays' hits
         surface = fine.subset(among).plus(p2, n2, grid.curvature[grid.tree.query(p2)[1]])
         frames, pair, finger, thumb_sample, finger_sample = pinch_frames(
-            ws[thumb], [ws[f] for f in others], radii, p1, n1, p2, n2, rng, PINCH_ROLLS)
+            ws[thumb], [ws[f] for f in others], radii, p1, n1, p2, n2, rng, PINCH_ROLLS,
+            mismatch=2 * options.grasp.ik_tolerance)
         n, k = len(context.frames), len(frames)
         nan, none = np.full((n, 3), np.nan), np.full(n, -1)
         hints = Hints(np.concatenate([none, np.array(others)[finger] if k else np.zeros(0, int)]),
                       *(np.concatenate([nan, x[pair]]) for x in (p1, n1, p2, n2)),
                       np.concatenate([none, thumb_sample]), np.concatenate([none, finger_sample]))
         context = context._replace(surface=surface, frames=np.concatenate([context.frames, frames]), hints=hints)
-        yield context, np.arange(n, n + k)
+        clear = hints_clear(context.hand_model, ws, frames, hints.rows(np.arange(n, n + k)), context.distance)
+        yield context, n + np.flatnonzero(clear), n + np.flatnonzero(~clear)
 
 
 # ------------------------------------------------------------------ per-process work
@@ -418,13 +421,22 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
         # until enough grasps clear it, then anywhere on it; the grid of §IV-A-1 last
         # (a support no pinch suits, such as a box's widest face for a small hand, leaves
         # its pass short: only the number of grasps then asks for more frames)
+        # frames whose hinted fingers bury a link in the object (:func:`.fingertips.hints_clear`)
+        # go after every pass's other frames: their hints fail, and they seldom give a grasp
         passes = _pinch_searches(context, [*supports, None])
         stops = [lambda kept, i=i: clear.counts(kept)[i] >= per_support and long_enough(kept)
                  for i in range(len(supports))] + [long_enough]
-        for (pinch, pinch_order), stop in zip(passes, stops):
+        later = []
+        for (pinch, first, rest), stop in zip(passes, stops):
+            later.append((pinch, rest, stop))
             if not stop(kept):
                 before = done
-                search(pinch, pinch_order, stop)
+                search(pinch, first, stop)
+                pinch_done += done - before
+        for pinch, rest, stop in later:
+            if not stop(kept):
+                before = done
+                search(pinch, rest, stop)
                 pinch_done += done - before
         if not long_enough(kept):
             search(context, order, long_enough)

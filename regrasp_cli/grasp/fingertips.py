@@ -137,13 +137,36 @@ def _candidates(voxels: HandVoxels, finger: int, ws: FingerWorkspace, inside: tu
 def _buried(hm: HandModel, X_OG: np.ndarray, distance: DistanceGrid | None) -> np.ndarray:
     """Which frames X_OG (F, 4, 4) bury the palm's spheres (:meth:`.single.HandModel.palm_probes`)
     deeper than :data:`SKIP_DEPTH` in the object, by its ``distance`` grid (F,): not worth
-    a search.  (Doing the same for a pinch frame's pinching fingers at their workspace
-    samples lost the rim pinches a cup needs: 1 of 8 tuning runs solved against 6.)"""
+    a search.  (Dropping the pinch frames whose pinching fingers do so at their workspace
+    samples lost the rim pinches a cup needs, 1 of 8 tuning runs solved against 6: they
+    go last instead, :func:`hints_clear`.)"""
     out = np.zeros(len(X_OG), dtype=bool)
     c, r = hm.palm_probes()
     if distance is None or not len(r):
         return out
     return np.max(r - distance(c @ X_OG[:, :3, :3].transpose(0, 2, 1) + X_OG[:, None, :3, 3]), axis=1) > SKIP_DEPTH
+
+
+def hints_clear(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], X_OG: np.ndarray, hints: Hints,
+                distance: DistanceGrid) -> np.ndarray:
+    """Which frames X_OG (F, 4, 4) leave the palm and both hinted fingers, posed at the
+    hints' workspace samples, no deeper than :data:`SKIP_DEPTH` in the object by its
+    ``distance`` grid (F,): the frames whose hinted contacts the search will check
+    exactly (a pinch frame puts both tips within the IK tolerance of their targets, so
+    the samples' postures are those the search finds)."""
+    ok = ~_buried(hm, X_OG, distance)
+    chains, probes = hm.chains(), hm.probes()
+    thumb = hm.hand.opposing
+    for f in range(len(chains)):
+        rows = np.flatnonzero(ok & ((hints.finger == f) | (f == thumb)))
+        if not len(rows) or not len(probes[f].radii):
+            continue
+        sample = (hints.thumb_sample if f == thumb else hints.finger_sample)[rows]
+        X = X_OG[rows]
+        c_G = probes[f].centres(chains[f].forward(workspaces[f].sample_q[sample])[0])
+        c_O = np.einsum("nij,npj->npi", X[:, :3, :3], c_G) + X[:, None, :3, 3]
+        ok[rows[probes[f].depth(c_O, distance) > SKIP_DEPTH]] = False
+    return ok
 
 
 def _worth_checking(probes: LinkProbes, chain: Chain, Q: np.ndarray, ok: np.ndarray, b: np.ndarray,
