@@ -180,16 +180,15 @@ class _SupportClear:
                                              np.array([size])))
         self.memo: dict[int, np.ndarray] = {}
 
-    def __call__(self, g: Grasp) -> np.ndarray:
-        if g.frame_index not in self.memo:
-            shape = hand_shapes(self.robot, self.hand, g.finger_q, self.tolerance)[0]
-            self.memo[g.frame_index] = np.array([not hand_hits_static(shape, g.X_OG, slab, touching=True)
-                                                 for slab in self.slabs], dtype=bool).reshape(len(self.slabs))
-        return self.memo[g.frame_index]
-
     def counts(self, grasps: list[Grasp]) -> np.ndarray:
         """Per support, how many of ``grasps`` clear it."""
-        return np.array([self(g) for g in grasps], dtype=int).reshape(-1, len(self.slabs)).sum(axis=0)
+        new = [g for g in grasps if g.frame_index not in self.memo]
+        if new:  # posed in one call: a call's set-up costs as much as a few hands
+            shapes = hand_shapes(self.robot, self.hand, np.array([g.finger_q for g in new]), self.tolerance)
+            for g, shape in zip(new, shapes):
+                self.memo[g.frame_index] = np.array([not hand_hits_static(shape, g.X_OG, slab, touching=True)
+                                                     for slab in self.slabs], dtype=bool).reshape(len(self.slabs))
+        return np.array([self.memo[g.frame_index] for g in grasps], dtype=int).reshape(-1, len(self.slabs)).sum(axis=0)
 
 
 def _pinch_searches(context: _Search, supports: list[tuple[np.ndarray, float] | None]):
@@ -227,8 +226,7 @@ def _pinch_searches(context: _Search, supports: list[tuple[np.ndarray, float] | 
         # other fingers take contacts low on its rim goes through it), plus the rays' hits
         surface = fine.subset(among).plus(p2, n2, grid.curvature[grid.tree.query(p2)[1]])
         frames, pair, finger, thumb_sample, finger_sample = pinch_frames(
-            ws[thumb], [ws[f] for f in others], radii, p1, n1, p2, n2, rng, PINCH_ROLLS,
-            mismatch=2 * options.grasp.ik_tolerance)
+            ws[thumb], [ws[f] for f in others], radii, p1, n1, p2, n2, rng, PINCH_ROLLS)
         n, k = len(context.frames), len(frames)
         nan, none = np.full((n, 3), np.nan), np.full(n, -1)
         hints = Hints(np.concatenate([none, np.array(others)[finger] if k else np.zeros(0, int)]),

@@ -53,6 +53,9 @@ from regrasp_cli.model.chain import Chain, batch_dls
 FACING_COS = 0.2  # a candidate's normal faces the closing fingertip at least this squarely
 ALIGN_WEIGHT = 4.0  # weight of Nguyen's two-contact condition against the thumb (ranking)
 SKIP_DEPTH = 0.002  # m: a link sphere deeper than this in the object: not worth the exact check
+# a finger's candidates go to IK in rounds, by their place in their frame's order: the
+# rows after a frame's first success are wasted work (most frames place a finger early)
+IK_ROUNDS = ((0, 2), (2, 6), (6, 1_000_000))
 
 
 @dataclass(frozen=True)
@@ -151,9 +154,10 @@ def hints_clear(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], X_OG: np
                 distance: DistanceGrid) -> np.ndarray:
     """Which frames X_OG (F, 4, 4) leave the palm and both hinted fingers, posed at the
     hints' workspace samples, no deeper than :data:`SKIP_DEPTH` in the object by its
-    ``distance`` grid (F,): the frames whose hinted contacts the search will check
-    exactly (a pinch frame puts both tips within the IK tolerance of their targets, so
-    the samples' postures are those the search finds)."""
+    ``distance`` grid (F,): the frames whose hinted contacts the search is likely to check
+    exactly (a pinch frame puts both tips within 1.5 mm of their targets, so their IK
+    solutions lie near the samples' postures).  An ordering, not a verdict: the others
+    are searched last (:mod:`.build`)."""
     ok = ~_buried(hm, X_OG, distance)
     chains, probes = hm.chains(), hm.probes()
     thumb = hm.hand.opposing
@@ -162,8 +166,9 @@ def hints_clear(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], X_OG: np
         if not len(rows) or not len(probes[f].radii):
             continue
         sample = (hints.thumb_sample if f == thumb else hints.finger_sample)[rows]
+        used, at = np.unique(sample, return_inverse=True)  # the rolls of a pair share their samples
+        c_G = probes[f].centres(chains[f].forward(workspaces[f].sample_q[used])[0])[at]
         X = X_OG[rows]
-        c_G = probes[f].centres(chains[f].forward(workspaces[f].sample_q[sample])[0])
         c_O = np.einsum("nij,npj->npi", X[:, :3, :3], c_G) + X[:, None, :3, 3]
         ok[rows[probes[f].depth(c_O, distance) > SKIP_DEPTH]] = False
     return ok
@@ -268,26 +273,37 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
             fl, near, cand_p, cand_n = _with_hints(hints, f == thumb, f, live, X_OG, ws, r_tip, fl, slot, near,
                                                    cand_p, cand_n)
         stats["contacts"] += len(fl)
-        b = live[fl]
-        target_G = np.einsum("bij,bj->bi", R_GO[b], cand_p + r_tip * cand_n) + t_GO[b]
-        Q, ok, J = batch_ik(chains[f], hm.robot.lower[idx], hm.robot.upper[idx], ws.sample_q[near], target_G,
-                            options.ik_iterations, options.ik_tolerance)
-        stats["ik"] += int(ok.sum())
-        for k in _worth_checking(probes[f], chains[f], Q, ok, b, X_OG, distance):
-            frame = b[k]
-            if f in placed[frame]:
+        rank = np.arange(len(fl)) - np.searchsorted(fl, fl)  # a row's place in its frame's order
+        held, J_held = [], []  # the frames this finger touches in, and its Jacobians there
+        for lo, hi in IK_ROUNDS:  # the first rows of every frame, then the next of those left open
+            rows = np.flatnonzero((rank >= lo) & (rank < hi))
+            rows = rows[~in_contact[live[fl[rows]], f]]
+            if not len(rows):
                 continue
-            qf = q[frame].copy()
-            qf[idx] = Q[k]
-            hm.set_object(X_OG[frame])
-            if hm.collides(qf, placed[frame], f):
-                stats["collisions"] += 1
-                continue
-            q[frame] = qf
-            placed[frame].add(f)
-            in_contact[frame, f] = True
-            points[frame, f], normals[frame, f] = cand_p[k], cand_n[k]
-            axes[frame, f] = X_OG[frame, :3, :3] @ force_ellipsoid_axis(J[k])
+            b = live[fl[rows]]
+            p, n = cand_p[rows], cand_n[rows]
+            target_G = np.einsum("bij,bj->bi", R_GO[b], p + r_tip * n) + t_GO[b]
+            Q, ok, J = batch_ik(chains[f], hm.robot.lower[idx], hm.robot.upper[idx], ws.sample_q[near[rows]], target_G,
+                                options.ik_iterations, options.ik_tolerance)
+            stats["ik"] += int(ok.sum())
+            for k in _worth_checking(probes[f], chains[f], Q, ok, b, X_OG, distance):
+                frame = b[k]
+                if f in placed[frame]:
+                    continue
+                qf = q[frame].copy()
+                qf[idx] = Q[k]
+                hm.set_object(X_OG[frame])
+                if hm.collides(qf, placed[frame], f):
+                    stats["collisions"] += 1
+                    continue
+                q[frame] = qf
+                placed[frame].add(f)
+                in_contact[frame, f] = True
+                points[frame, f], normals[frame, f] = p[k], n[k]
+                held.append(frame)
+                J_held.append(J[k])
+        if held:  # the force ellipsoids' axes, in O
+            axes[held, f] = np.einsum("bij,bj->bi", X_OG[held, :3, :3], force_ellipsoid_axis(np.array(J_held)))
         if f == thumb:  # no stable grasp without the thumb (§IV-A-2)
             stats["few_contacts"] += int((~in_contact[live, thumb]).sum())
             live = live[in_contact[live, thumb]]

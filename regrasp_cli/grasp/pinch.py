@@ -46,13 +46,11 @@ def tip_pairs(thumb: FingerWorkspace, finger: FingerWorkspace, rng: np.random.Ge
 
 def pinch_frames(thumb: FingerWorkspace, fingers: list[FingerWorkspace], radii: tuple[float, list[float]],
                  p1: np.ndarray, n1: np.ndarray, p2: np.ndarray, n2: np.ndarray,
-                 rng: np.random.Generator, rolls: int = 8, *, mismatch: float) -> tuple[np.ndarray, ...]:
+                 rng: np.random.Generator, rolls: int = 8) -> tuple[np.ndarray, ...]:
     """Grasp frames X_OG (k, 4, 4), ``rolls`` per antipodal pair (p1, n1), (p2, n2) (each
-    (k, 3), frame O) that some tip pair can span within ``mismatch`` (m): the thumb's tip
-    centre on ``p1 + r n1``, a finger's (the fingers taken in turn) on ``p2 + r n2``, up to
-    the mismatch of their distances, split evenly (within twice the IK tolerance, both
-    fingers' IK then converges at their samples' postures, where a 3 mm window left 40 %
-    of the thumbs against a joint limit short of their targets); the hand turned about the pair's axis by
+    (k, 3), frame O) that some tip pair can span within 3 mm: the thumb's tip centre on
+    ``p1 + r n1``, a finger's (the fingers taken in turn) on ``p2 + r n2``, up to the
+    mismatch of their distances, split evenly; the hand turned about the pair's axis by
     evenly spaced angles from a random one; the first turn of every pair first, then the
     second, and so on.  ``radii`` = (thumb tip radius, finger tip
     radii).  Also returns, per frame, the index of its pair and of its finger (in
@@ -73,7 +71,7 @@ def pinch_frames(thumb: FingerWorkspace, fingers: list[FingerWorkspace], radii: 
         a, b, ia, ib, spans = a[order], b[order], ia[order], ib[order], spans[order]
         c1, c2 = p1[j] + r_thumb * n1[j], p2[j] + r_fingers[f] * n2[j]
         span = np.linalg.norm(c2 - c1, axis=1)
-        lo, hi = np.searchsorted(spans, span - mismatch), np.searchsorted(spans, span + mismatch)
+        lo, hi = np.searchsorted(spans, span - 0.003), np.searchsorted(spans, span + 0.003)
         ok = (hi > lo) & (span > 1e-9)
         j, c1, c2, span, lo, hi = j[ok], c1[ok], c2[ok], span[ok], lo[ok], hi[ok]
         m = lo + np.minimum((rng.random(len(j)) * (hi - lo)).astype(int), hi - lo - 1)  # a tip pair at random

@@ -344,30 +344,37 @@ def force_ellipsoid_axis(J, rtol: float = 1e-9) -> np.ndarray:
 
     Args:
         J: (3, n) translational Jacobian of the fingertip (m/rad for revolute joints),
-            expressed in the frame of the result (e.g. the object frame).
+            expressed in the frame of the result (e.g. the object frame); or a batch of
+            them (B, 3, n).
         rtol: singular values below ``rtol * max`` count as zero.
 
     Returns:
-        (3,) unit vector: the direction of largest fingertip force for unit joint torques
-        (``tau = J^T f``, ``||tau|| <= 1``  <=>  ``f^T J J^T f <= 1``), i.e. the eigenvector
-        of ``J J^T`` with the smallest *nonzero* eigenvalue (left singular vector of the
-        smallest nonzero singular value of ``J``).  Directions in the null space of
-        ``J^T`` are held by the structure, not the joints, and are excluded: for a rank-1
-        finger (one joint) the axis is the joint's direction of motion, for a full-rank
-        finger it is the classic force-ellipsoid major axis.  An axis has no sign; the
-        result's largest-magnitude component is made positive for determinism.
+        (3,) unit vector ((B, 3) for a batch): the direction of largest fingertip force for
+        unit joint torques (``tau = J^T f``, ``||tau|| <= 1``  <=>  ``f^T J J^T f <= 1``),
+        i.e. the eigenvector of ``J J^T`` with the smallest *nonzero* eigenvalue (left
+        singular vector of the smallest nonzero singular value of ``J``).  Directions in
+        the null space of ``J^T`` are held by the structure, not the joints, and are
+        excluded: for a rank-1 finger (one joint) the axis is the joint's direction of
+        motion, for a full-rank finger it is the classic force-ellipsoid major axis.  An
+        axis has no sign; the result's largest-magnitude component is made positive for
+        determinism.
     """
     J = np.asarray(J, dtype=float)
     if J.ndim == 1:
         J = J.reshape(3, 1)
-    if J.ndim != 2 or J.shape[0] != 3:
-        raise ValueError(f"J must have shape (3, n), got {J.shape}")
-    U, s, _ = np.linalg.svd(J, full_matrices=False)
-    if s.size == 0 or s[0] <= 0.0:
+    if J.ndim not in (2, 3) or J.shape[-2] != 3:
+        raise ValueError(f"J must have shape (3, n) or (B, 3, n), got {J.shape}")
+    if J.ndim == 2:
+        return force_ellipsoid_axis(J[None], rtol)[0]
+    if not len(J):
+        return np.zeros((0, 3))
+    U, s, _ = np.linalg.svd(J, full_matrices=False)  # (B, 3, k), (B, k)
+    if s.shape[1] == 0 or np.any(s[:, 0] <= 0.0):
         raise ValueError("J is zero: the finger cannot apply any force")
-    rank = int(np.sum(s > rtol * s[0]))
-    a = U[:, rank - 1]
-    return a if a[np.argmax(np.abs(a))] > 0 else -a
+    rank = np.sum(s > rtol * s[:, :1], axis=1)
+    rows = np.arange(len(J))
+    a = U[rows, :, rank - 1]
+    return a * np.where(a[rows, np.argmax(np.abs(a), axis=1)] > 0, 1.0, -1.0)[:, None]
 
 
 # ---------------------------------------------------------------------- quality scores

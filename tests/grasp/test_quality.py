@@ -293,6 +293,18 @@ def test_force_ellipsoid_axis_full_rank():
         force_ellipsoid_axis(np.zeros((3, 2)))
 
 
+def test_force_ellipsoid_axis_batch_is_row_by_row():
+    """A batch of Jacobians (rank 1 to 3) gives each row's axis, sign included."""
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(40, 3, 4))
+    J[:10, :, 1:] = 0.0  # rank 1
+    J[10:20, :, 2:] = J[10:20, :, :2] @ rng.normal(size=(2, 2))  # rank 2
+    batch = force_ellipsoid_axis(J)
+    assert batch.shape == (40, 3)
+    assert np.array_equal(batch, np.array([force_ellipsoid_axis(j) for j in J]))
+    assert_same_axis(batch[0], J[0, :, 0])
+
+
 # ------------------------------------------------------------------------ quality terms
 
 
