@@ -56,6 +56,7 @@ CHUNK = 256  # frames per work item; the target is checked after each
 PINCH_WIDTH = 0.12  # m: widest antipodal pair tried for a pinch frame (the fingertips' reach decides)
 PINCH_ROLLS = 8  # turns of the hand about a pinch pair's axis tried (those burying a link dropped)
 PINCH_PLACEMENTS = 3  # the pinch pass levels its pairs with the supports of this many stable placements
+PINCH_BLOCK = 2048  # pinch frames sorted by hints_clear at a time (a pass has up to tens of thousands)
 DISTANCE_MARGIN = 0.02  # m: the object's distance grid reaches this far out of its bounding box ...
 DISTANCE_STEP, DISTANCE_SAMPLES = 0.003, 30_000  # ... and reads samples this far apart (m), at most this many
 SCORE_NAMES = ("epsilon", "centroid", "ellipsoid", "curvature", "total")
@@ -191,50 +192,54 @@ class _SupportClear:
         return np.array([self.memo[g.frame_index] for g in grasps], dtype=int).reshape(-1, len(self.slabs)).sum(axis=0)
 
 
-def _pinch_searches(context: _Search, supports: list[tuple[np.ndarray, float] | None]):
-    """The searches of the pinch passes (:mod:`.pinch`), one per entry of ``supports``,
-    each run after the previous ones' frames so that frame indices stay unique; built
-    lazily (each casts its rays when its turn comes).  Each uses a surface sampled twice as
-    finely as the grid's (a 14 mm rim gets one row of samples).  For a support (one of the
-    object's most stable placements, :func:`_supports`) only the samples where a fingertip
-    clears it are kept and the pairs are levelled with it: the pinches across a flat object
-    lying there.  ``None``: pairs anywhere on the surface.  Which grasps a scene lets a
-    hand use is decided online (:mod:`manip.doublegrasp`)."""
+def _fine_surface(context: _Search, rng: np.random.Generator) -> Surface:
+    """The object's surface sampled twice as finely as the grid's (a 14 mm rim gets one row
+    of samples), curvature read from the grid's samples, so that the scores of the grid's
+    and the pinch passes' grasps compare: the surface of the pinch passes."""
+    grid = context.surface
+    r_tip = min(f.tip_radius for f in context.hand_model.hand.spec.fingers)
+    fine = build_surface(context.problem.object.mesh, sampling_step(r_tip) / 2, rng, like=grid)
+    return replace(fine, curvature=grid.curvature[grid.tree.query(fine.points)[1]])
+
+
+def _pinch_pass(context: _Search, grid: Surface, fine: Surface, support: tuple[np.ndarray, float] | None,
+                rng: np.random.Generator) -> tuple[_Search, np.ndarray]:
+    """The search of a pinch pass (:mod:`.pinch`) over the ``fine`` surface: ``context``
+    with the pass's frames appended to its frames (so that frame indices stay unique
+    across passes), their hints and the pass's surface; and the indices of the new frames.
+    For a support (one of the object's most stable placements, :func:`_supports`) only the
+    samples where a fingertip clears it are kept and the pairs are levelled with it: the
+    pinches across a flat object lying there.  ``None``: pairs anywhere on the surface.
+    Which grasps a scene lets a hand use is decided online (:mod:`manip.doublegrasp`)."""
     problem, options = context.problem, context.options
-    rng = np.random.default_rng([options.seed, 1])
     h = context.hand_model.hand
     spec, thumb, ws = h.spec, h.opposing, context.workspaces
     r_tip = min(f.tip_radius for f in spec.fingers)
-    grid = context.surface  # curvature read from its samples, so that the scores of both passes compare
-    fine = build_surface(problem.object.mesh, sampling_step(r_tip) / 2, rng, like=grid)
-    fine = replace(fine, curvature=grid.curvature[grid.tree.query(fine.points)[1]])
     clearance = r_tip - problem.spec.planning.contact_tolerance  # tip centre above the support
     others = [f for f in range(len(ws)) if f != thumb]
     radii = (spec.fingers[thumb].tip_radius, [spec.fingers[f].tip_radius for f in others])
-    for support in supports:
-        if support is None:
-            among, level = np.arange(len(fine.points)), None
-        else:
-            n_O, d = support
-            among, level = np.flatnonzero((fine.points + r_tip * fine.normals) @ n_O <= d - clearance), -n_O
-        p1, n1, p2, n2 = antipodal_pairs(problem.object.mesh, fine, problem.spec.object.friction, (0.0, PINCH_WIDTH),
-                                         options.grasp.pinch_frames, rng, among=among, level=level)
-        if support is not None:
-            keep = (p2 + r_tip * n2) @ n_O <= d - clearance  # the second fingertip clears the support too
-            p1, n1, p2, n2 = p1[keep], n1[keep], p2[keep], n2[keep]
-        # contacts only where a fingertip clears the support (a pinch on a flat object whose
-        # other fingers take contacts low on its rim goes through it), plus the rays' hits
-        surface = fine.subset(among).plus(p2, n2, grid.curvature[grid.tree.query(p2)[1]])
-        frames, pair, finger, thumb_sample, finger_sample = pinch_frames(
-            ws[thumb], [ws[f] for f in others], radii, p1, n1, p2, n2, rng, PINCH_ROLLS)
-        n, k = len(context.frames), len(frames)
-        nan, none = np.full((n, 3), np.nan), np.full(n, -1)
-        hints = Hints(np.concatenate([none, np.array(others)[finger] if k else np.zeros(0, int)]),
-                      *(np.concatenate([nan, x[pair]]) for x in (p1, n1, p2, n2)),
-                      np.concatenate([none, thumb_sample]), np.concatenate([none, finger_sample]))
-        context = context._replace(surface=surface, frames=np.concatenate([context.frames, frames]), hints=hints)
-        clear = hints_clear(context.hand_model, ws, frames, hints.rows(np.arange(n, n + k)), context.distance)
-        yield context, n + np.flatnonzero(clear), n + np.flatnonzero(~clear)
+    if support is None:
+        among, level = np.arange(len(fine.points)), None
+    else:
+        n_O, d = support
+        among, level = np.flatnonzero((fine.points + r_tip * fine.normals) @ n_O <= d - clearance), -n_O
+    p1, n1, p2, n2 = antipodal_pairs(problem.object.mesh, fine, problem.spec.object.friction, (0.0, PINCH_WIDTH),
+                                     options.grasp.pinch_frames, rng, among=among, level=level)
+    if support is not None:
+        keep = (p2 + r_tip * n2) @ n_O <= d - clearance  # the second fingertip clears the support too
+        p1, n1, p2, n2 = p1[keep], n1[keep], p2[keep], n2[keep]
+    # contacts only where a fingertip clears the support (a pinch on a flat object whose
+    # other fingers take contacts low on its rim goes through it), plus the rays' hits
+    surface = fine.subset(among).plus(p2, n2, grid.curvature[grid.tree.query(p2)[1]])
+    frames, pair, finger, thumb_sample, finger_sample = pinch_frames(
+        ws[thumb], [ws[f] for f in others], radii, p1, n1, p2, n2, rng, PINCH_ROLLS)
+    n, k = len(context.frames), len(frames)
+    nan, none = np.full((n, 3), np.nan), np.full(n, -1)  # the earlier frames are not this pass's
+    hints = Hints(np.concatenate([none, np.array(others)[finger] if k else np.zeros(0, int)]),
+                  *(np.concatenate([nan, x[pair]]) for x in (p1, n1, p2, n2)),
+                  np.concatenate([none, thumb_sample]), np.concatenate([none, finger_sample]))
+    return (context._replace(surface=surface, frames=np.concatenate([context.frames, frames]), hints=hints),
+            np.arange(n, n + k))
 
 
 # ------------------------------------------------------------------ per-process work
@@ -411,6 +416,22 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
             outputs.close()  # stops the workers still busy with chunks we do not need
         return enough(kept)
 
+    def clear_first(pinch: _Search, indices: np.ndarray, stop) -> np.ndarray:
+        """Search the frames ``indices`` of a pinch pass a block at a time, those whose
+        hinted fingers clear the object first (the test costs as much per frame as a
+        search of the frames that pass it, hence blocks); return the others."""
+        rest = []
+        for s in range(0, len(indices), PINCH_BLOCK):
+            block = indices[s:s + PINCH_BLOCK]
+            if stop(kept):
+                rest.append(block)
+                continue
+            ok = hints_clear(pinch.hand_model, pinch.workspaces, pinch.frames[block], pinch.hints.rows(block),
+                             pinch.distance)
+            rest.append(block[~ok])
+            search(pinch, block[ok], stop)
+        return np.concatenate(rest) if rest else indices
+
     pinch_done = 0
     if jaw or not g_opts.pinch_frames:  # their frames are few and in random order: every support counts
         search(context, order, enough)
@@ -418,23 +439,25 @@ def build_grasps(scene: Path, cache_dir: Path, hand: str, options: BuildOptions,
         # contacts first: pinch frames on each support of the object's stable placements
         # until enough grasps clear it, then anywhere on it; the grid of §IV-A-1 last
         # (a support no pinch suits, such as a box's widest face for a small hand, leaves
-        # its pass short: only the number of grasps then asks for more frames)
+        # its pass short: only the number of grasps then asks for more frames).  A pass's
         # frames whose hinted fingers bury a link in the object (:func:`.fingertips.hints_clear`)
-        # go after every pass's other frames: their hints fail, and they seldom give a grasp
-        passes = _pinch_searches(context, [*supports, None])
+        # go after every pass's other frames: their hints fail, and they seldom give a grasp.
         stops = [lambda kept, i=i: clear.counts(kept)[i] >= per_support and long_enough(kept)
                  for i in range(len(supports))] + [long_enough]
-        later = []
-        for (pinch, first, rest), stop in zip(passes, stops):
-            later.append((pinch, rest, stop))
+        rng = np.random.default_rng([options.seed, 1])
+        fine = _fine_surface(context, rng)
+        pinch, later = context, []
+        for support, stop in zip([*supports, None], stops):
+            if stop(kept):  # a pass is built (its rays cast) only when its turn comes
+                continue
+            pinch, indices = _pinch_pass(pinch, context.surface, fine, support, rng)
+            before = done
+            later.append((pinch, clear_first(pinch, indices, stop), stop))
+            pinch_done += done - before
+        for pass_context, rest, stop in later:
             if not stop(kept):
                 before = done
-                search(pinch, first, stop)
-                pinch_done += done - before
-        for pinch, rest, stop in later:
-            if not stop(kept):
-                before = done
-                search(pinch, rest, stop)
+                search(pass_context, rest, stop)
                 pinch_done += done - before
         if not long_enough(kept):
             search(context, order, long_enough)
