@@ -80,6 +80,22 @@ def test_a_frames_grasp_does_not_depend_on_its_batch(searched):
         assert grasp_for_frame(hm, ws, surface, frames[i], i, 0.5, rho, GraspOptions(), distance)[0] is None
 
 
+def test_ik_in_rounds_finds_the_grasps_of_one_batch(searched, monkeypatch):
+    """The rounds of IK (a frame's first candidates, then the next of the frames still
+    open) pick, per finger, the first candidate that passes: the grasps of one round."""
+    import regrasp_cli.grasp.fingertips as fingertips
+
+    hm, ws, surface, frames, rho, grasps, stats, _, distance = searched
+    monkeypatch.setattr(fingertips, "IK_ROUNDS", ((0, 1_000_000),))
+    once, once_stats = grasps_for_frames(hm, ws, surface, frames, np.arange(len(frames)), 0.5, rho, GraspOptions(),
+                                         distance=distance)
+    assert [g.frame_index for g in once] == [g.frame_index for g in grasps]
+    for a, b in zip(once, grasps):
+        np.testing.assert_array_equal(a.finger_q, b.finger_q)
+        np.testing.assert_array_equal(a.points, b.points)
+    assert once_stats["ik"] >= stats["ik"]  # the rounds skip the rows after a frame's success
+
+
 @pytest.mark.parametrize("name", sorted(MESHES))
 def test_the_distance_grid_saves_exact_checks_not_grasps(problem, cache_dir, name):
     """With the object's distance grid, frames whose palm is buried are not searched and
