@@ -144,6 +144,23 @@ def test_open_mesh_with_inconsistent_winding_gets_outward_normals(box, removed):
     assert np.linalg.norm(s.mass_centre) < 0.01
 
 
+def test_a_few_samples_of_each_patch_vote_on_its_side(box):
+    """A patch of consistent winding larger than VOTERS_PER_PATCH samples is oriented by
+    its first voters alone: the normals are as outward as with every sample voting."""
+    from regrasp_cli.grasp import surface as surface_module
+
+    patch = np.array([2, 0, 2, 1, 2, 0, 2, 2])
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(surface_module, "VOTERS_PER_PATCH", 2)
+        np.testing.assert_array_equal(surface_module._voters(patch), [0, 1, 2, 3, 5])
+        broken, true_normals = _broken_box(box, 3)
+        with pytest.warns(UserWarning, match="mass centre"):
+            s = _build(broken, 0.004, seed=3)
+    assert len(s) > 20 * 2 * len(broken.faces)  # patches of a few faces: far more samples than the 2 voters each
+    outward = np.einsum("ij,ij->i", true_normals[s.face_index], s.normals) > 0.99
+    assert outward.mean() >= 0.95
+
+
 def test_a_finer_surface_takes_the_faces_orientation_of_a_coarser_one(box):
     """The pinch passes' surface (half the step) reads the grid surface's face orientation
     instead of casting rays again: its normals are as outward as the coarse one's."""
