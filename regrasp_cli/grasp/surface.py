@@ -483,18 +483,26 @@ def distance_grid(surface: Surface, margin: float, resolution: float = 0.002) ->
     axes = [lo[d] + resolution * np.arange(shape[d]) for d in range(3)]
     X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     near = 2 * surface.step
-    # the cell's NEIGHBOURS nearest samples (a far cell's exact query: 90 % of the time)
-    dist, i = surface.tree.query(X, k=NEIGHBOURS, distance_upper_bound=near)
-    far = ~np.isfinite(dist[:, 0])
+    # the cell's NEIGHBOURS nearest samples and their tangent planes, only for the cells
+    # within ``near`` plus a cell of a sample's cell (the others are far: querying them was
+    # half the grid's time)
+    occupied = np.zeros(shape, dtype=bool)
+    ijk = np.clip(np.rint((surface.points - lo) / resolution).astype(np.intp), 0, np.array(shape) - 1)
+    occupied[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = True
+    maybe = np.flatnonzero(resolution * distance_transform_edt(~occupied).ravel() < near + resolution)
+    dist, i = surface.tree.query(X[maybe], k=NEIGHBOURS, distance_upper_bound=near)
     found = np.isfinite(dist)
     i[~found] = 0
-    plane = np.einsum("ijk,ijk->ij", X[:, None] - surface.points[i], surface.normals[i])
+    plane = np.einsum("ijk,ijk->ij", X[maybe, None] - surface.points[i], surface.normals[i])
     plane[~found] = -np.inf
     # inside only behind every neighbour's tangent plane (a point above a rim is in front of
     # the rim's top samples, behind the wall's): by the least deep of them; outside, the
     # distance to the nearest sample
     shallowest = plane.max(axis=1)
-    values = np.where(shallowest < 0, shallowest, np.where(far, 0.0, dist[:, 0]))
+    far = np.ones(len(X), dtype=bool)
+    far[maybe] = ~found[:, 0]
+    values = np.zeros(len(X))
+    values[maybe] = np.where(shallowest < 0, shallowest, np.where(found[:, 0], dist[:, 0], 0.0))
     regions, _ = label(far.reshape(shape))
     border = np.unique(np.concatenate([regions[0].ravel(), regions[-1].ravel(), regions[:, 0].ravel(),
                                        regions[:, -1].ravel(), regions[:, :, 0].ravel(), regions[:, :, -1].ravel()]))
