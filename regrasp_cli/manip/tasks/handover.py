@@ -293,49 +293,37 @@ def _exchanges(scratch: Scratch, rng: np.random.Generator, doubles: list[DoubleG
                lists: dict[str, GraspList], g: str):
     """(double grasp, exchange configuration, double grasps tried) best double grasp
     first: for each of the best ``double_grasps_tried``, the exchange pose of Fig. 6 and
-    then Gaussian samples around it until both arms reach one, the arms alone; then, for
-    each again, samples turned about the vertical with the torso solved with both arms (a
-    generator: the next is searched only when a query of the previous one failed).  With
-    the arms alone, the samples that both arms reach with the torso at rest are tried
-    for every double grasp before the others of any: on the default scene a best double
-    grasp with none of them failed its 16 arm IKs (up to 5 double grasps, 2-5 s) where a
-    later one had some and succeeded at the first."""
+    then Gaussian samples around it until both arms reach one; then, for each again,
+    samples turned about the vertical with the torso solved with both arms (a generator:
+    the next is searched only when a query of the previous one failed)."""
     o = scratch.options
     env, obj = static_geometry(scratch.problem.spec.obstacles), object_shape(scratch.problem)
-    centres, samples = {}, {}  # the pose of Fig. 6 of each double grasp, its samples: found once
-    rounds = ((False, True), (False, False), (True, None))  # (lean, reached alone: first, the others, all)
-    for lean, alone in rounds:
+    centres = {}  # the pose of Fig. 6 of each double grasp, found once
+    for lean in (False, True):  # every double grasp with the arms alone first, as the paper
         for tried, dg in enumerate(doubles[:o.double_grasps_tried], 1):
             if tried not in centres:
                 centres[tried] = exchange_pose(scratch, dg, lists, env, obj)[0]
             if centres[tried] is None:
                 continue
-            if (tried, lean) not in samples:
-                samples[(tried, lean)] = exchange_samples(scratch, rng, dg, lists, centres[tried], obj, env, lean)
-            ex = exchange_at(scratch, rng, dg, lists, samples[(tried, lean)], lean, alone)
+            ex = exchange_near(scratch, rng, dg, lists, centres[tried], obj, env, lean)
             if ex is not None:
                 yield dg, ex, tried
     yield None, None, min(len(doubles), o.double_grasps_tried)
 
 
 def exchange_near(scratch: Scratch, rng: np.random.Generator, dg: DoubleGrasp, lists: dict[str, GraspList],
-                  X_c: np.ndarray, obj: HandShape, env: StaticGeometry, lean: bool) -> ExchangeConfig | None:
-    """The exchange configuration of the first of :func:`exchange_samples` that both arms
-    reach (:func:`exchange_at`)."""
-    return exchange_at(scratch, rng, dg, lists, exchange_samples(scratch, rng, dg, lists, X_c, obj, env, lean), lean)
-
-
-def exchange_samples(scratch: Scratch, rng: np.random.Generator, dg: DoubleGrasp, lists: dict[str, GraspList],
-                     X_c: np.ndarray, obj: HandShape, env: StaticGeometry, lean: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Up to ``exchange_samples`` object poses X_WO (k, 4, 4) around X_c (4, 4) to try
-    for an exchange, and which of them each arm reaches alone with the torso at rest (k,),
-    those first: X_c itself and Gaussian samples; with ``lean``, samples turned about the
-    vertical (the orientation of Fig. 6 is a least-squares compromise, which two grasps
-    from above may not reach).  ``EXCHANGE_DRAWS`` times as many poses are drawn, and
-    those out of either arm's reach (one batched IK for all,
+                   X_c: np.ndarray, obj: HandShape, env: StaticGeometry, lean: bool) -> ExchangeConfig | None:
+    """The exchange configuration of the first of ``exchange_samples`` object poses around
+    X_c (4, 4) that both arms reach: X_c itself and Gaussian samples; with ``lean``,
+    samples turned about the vertical (the orientation of Fig. 6 is a least-squares
+    compromise, which two grasps from above may not reach) and the torso solved with
+    both arms (:func:`keyconf.exchange_configuration`).  ``EXCHANGE_DRAWS`` times as many
+    poses are drawn, and those out of either arm's reach (one batched IK for all,
     :func:`~regrasp_cli.model.ik.arm_reachable`) are dropped before any arm IK: on a small
-    cup, 4 in 5 of the arm IKs of the samples drawn failed.  The arms-alone test, from a
-    few seeds, misses most poses the arm IK reaches: it orders, it does not drop."""
+    cup, 4 in 5 of the arm IKs of the samples drawn failed.  Without ``lean`` the poses each
+    arm reaches alone, the torso at rest, go first (the arms' IK starts from a torso drawn
+    near rest: on the default scene, seed 0, 105 such IKs failed instead of 163); not only
+    them: that test, from a few seeds, misses most poses the arm IK reaches."""
     g, t = dg.giver.hand, dg.taker.hand
     n = scratch.options.exchange_samples
     poses = [X_c] + [_perturbed(scratch, rng, X_c, obj, EXCHANGE_YAWS[s % len(EXCHANGE_YAWS)] if lean else 0.0)
@@ -346,22 +334,11 @@ def exchange_samples(scratch: Scratch, rng: np.random.Generator, dg: DoubleGrasp
     for hand, grasps, k in ((g, lists[g], dg.giver.grasp), (t, lists[t], dg.taker.grasp)):
         X_WG = poses @ grasps.X_OG[k]
         reached &= arm_reachable(robot, hand, X_WG, reach_rng)
-        if not lean:
+        if not lean:  # each arm alone, the torso at rest: those the arms reach alone first
             alone &= arm_reachable(robot, hand, X_WG, reach_rng, torso=False)
     order = np.flatnonzero(reached)
-    order = order[np.argsort(~alone[order], kind="stable")][:n]
-    return poses[order], alone[order]
-
-
-def exchange_at(scratch: Scratch, rng: np.random.Generator, dg: DoubleGrasp, lists: dict[str, GraspList],
-                samples: tuple[np.ndarray, np.ndarray], lean: bool, alone: bool | None = None) -> ExchangeConfig | None:
-    """The exchange configuration (:func:`keyconf.exchange_configuration`, the torso
-    solved with both arms with ``lean``) of the first of the ``samples`` of
-    :func:`exchange_samples` that both arms reach: all of them, or (``alone``) only those
-    each arm reaches alone, or only the others."""
-    g, t = dg.giver.hand, dg.taker.hand
-    poses, reached_alone = samples
-    for X in poses if alone is None else poses[reached_alone == alone]:
+    order = order[np.argsort(~alone[order], kind="stable")]
+    for X in poses[order][:n]:
         ex = exchange_configuration(scratch, rng, lists[g], dg.giver.grasp, lists[t], dg.taker.grasp, X, lean)
         if ex is not None:
             return ex
