@@ -167,11 +167,16 @@ def hints_clear(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], X_OG: np
             continue
         sample = (hints.thumb_sample if f == thumb else hints.finger_sample)[rows]
         used, at = np.unique(sample, return_inverse=True)  # the rolls of a pair share their samples
-        c_G = probes[f].centres(chains[f].forward(workspaces[f].sample_q[used])[0])[at]
-        X = X_OG[rows]
-        c_O = np.einsum("nij,npj->npi", X[:, :3, :3], c_G) + X[:, None, :3, 3]
-        ok[rows[probes[f].depth(c_O, distance) > SKIP_DEPTH]] = False
+        joints_G = chains[f].forward(workspaces[f].sample_q[used])[0][at]
+        ok[rows[_link_depth(probes[f], joints_G, X_OG[rows], distance) > SKIP_DEPTH]] = False
     return ok
+
+
+def _link_depth(probes: LinkProbes, joints_G: np.ndarray, X_OG: np.ndarray, distance: DistanceGrid) -> np.ndarray:
+    """How deep (m) a finger's deepest link sphere lies in the object (:meth:`.single.LinkProbes.depth`)
+    for its joint frames ``joints_G`` (n, j, 4, 4) in G and the frames X_OG (n, 4, 4)."""
+    c_O = np.einsum("nij,npj->npi", X_OG[:, :3, :3], probes.centres(joints_G)) + X_OG[:, None, :3, 3]
+    return probes.depth(c_O, distance)
 
 
 def _worth_checking(probes: LinkProbes, chain: Chain, Q: np.ndarray, ok: np.ndarray, b: np.ndarray,
@@ -184,9 +189,7 @@ def _worth_checking(probes: LinkProbes, chain: Chain, Q: np.ndarray, ok: np.ndar
     rows = np.flatnonzero(ok)
     if distance is None or not len(rows) or not len(probes.radii):
         return rows
-    X = X_OG[b[rows]]
-    c_O = np.einsum("nij,npj->npi", X[:, :3, :3], probes.centres(chain.forward(Q[rows])[0])) + X[:, None, :3, 3]
-    return rows[probes.depth(c_O, distance) <= SKIP_DEPTH]
+    return rows[_link_depth(probes, chain.forward(Q[rows])[0], X_OG[b[rows]], distance) <= SKIP_DEPTH]
 
 
 def _with_hints(hints: Hints, opposing: bool, finger: int, live: np.ndarray, X_OG: np.ndarray, ws: FingerWorkspace,
