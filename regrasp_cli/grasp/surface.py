@@ -94,7 +94,8 @@ CURVATURE_K = 16
 CURVATURE_PERCENTILE = 95.0
 #: Rays cast on each side of a sample to orient its normal (non-watertight meshes).
 RAYS_PER_SIDE = 3
-VOTERS_PER_PATCH = 200  # samples of a consistently wound patch that vote on its side
+#: Samples of a consistently wound patch that vote on its side (its first, in sample order).
+VOTERS_PER_PATCH = 200
 
 
 @dataclass(frozen=True, eq=False)
