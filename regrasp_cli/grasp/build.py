@@ -47,7 +47,7 @@ from regrasp_cli.grasp.workspace import FingerWorkspace, WorkspaceOptions, hand_
 from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.parallel import ordered_map
 from regrasp_cli.scene import Problem, load_problem
-from regrasp_cli.spatial import rotation_aligning, rotation_angle
+from regrasp_cli.spatial import rotation_aligning
 from regrasp_cli.store import (Provenance, canonical_json, file_label, read_artefact, robot_label, sha256_params,
                                write_artefact)
 
@@ -345,18 +345,19 @@ def remove_duplicates(grasps: list[Grasp], distance: float, angle: float) -> lis
     """Best first; a grasp is dropped when a better kept one has its hand within
     ``distance`` (m) and ``angle`` (rad).
 
-    The kept hands' positions are compared in one array operation, with a margin far above
-    its rounding; only those it finds near get the exact pairwise test, so the result is
-    the pairwise loop's (the search calls this after every chunk, on every grasp so far)."""
+    Each grasp is compared with every kept one in array operations (the search calls this
+    after every chunk, on every grasp so far)."""
     ordered = sorted(grasps, key=lambda g: (-g.scores.total, g.frame_index))
     kept: list[Grasp] = []
-    p_kept = np.empty((len(ordered), 3))  # positions of the kept hands, in O
+    X_kept = np.empty((len(ordered), 4, 4))  # the kept hands, in O
+    cos_angle = np.cos(angle)
     for g in ordered:
-        p = g.X_OG[:3, 3]
-        near = np.flatnonzero(np.linalg.norm(p_kept[:len(kept)] - p, axis=1) < distance * (1 + 1e-9))
-        if not any(np.linalg.norm(p - kept[i].X_OG[:3, 3]) < distance
-                   and rotation_angle(g.X_OG[:3, :3].T @ kept[i].X_OG[:3, :3]) < angle for i in near):
-            p_kept[len(kept)] = p
+        n = len(kept)
+        near = np.flatnonzero(np.linalg.norm(X_kept[:n, :3, 3] - g.X_OG[:3, 3], axis=1) < distance)
+        # the angle of R_g^T R_k is below ``angle`` when its trace, sum_ij R_g R_k, is above 1 + 2 cos(angle)
+        if not len(near) or not np.any(np.einsum("ij,kij->k", g.X_OG[:3, :3], X_kept[near, :3, :3])
+                                       > 1.0 + 2.0 * cos_angle):
+            X_kept[n] = g.X_OG
             kept.append(g)
     return kept
 

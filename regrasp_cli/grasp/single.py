@@ -251,10 +251,16 @@ class HandModel:
 
     def collides(self, q: np.ndarray, fingers_placed: set[int], finger: int | None) -> bool:
         """Collision of finger ``finger`` (or of the whole hand when None) with the object,
-        the palm and the ``fingers_placed``."""
+        the palm and the ``fingers_placed``.  The pair found colliding moves to the front
+        of its list: the next check of that finger tries it first (most collisions of a
+        search are one finger's proximal phalanx against its neighbour's, checked last in
+        model order); the verdict does not depend on the order."""
         pin.updateGeometryPlacements(self.robot.model, self.data, self.gm, self.gd, self.robot.to_pin(q))
-        for k in self._pairs(frozenset(fingers_placed), finger):
+        pairs = self._pairs(frozenset(fingers_placed), finger)
+        for i, k in enumerate(pairs):
             if pin.computeCollision(self.gm, self.gd, k):
+                if i:
+                    pairs.insert(0, pairs.pop(i))
                 return True
         return False
 

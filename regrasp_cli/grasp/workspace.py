@@ -105,13 +105,20 @@ class HandVoxels:
         """Flat index into the maps' one-voxel border of each point (n, 3) in G: points
         off the map land on the border, which holds no finger."""
         shape = np.array(self.bits.shape)
-        ijk = np.rint((p_G - self.origin) / self.resolution).astype(np.intp)
-        np.clip(ijk, 0, shape - 1, out=ijk)
-        return (ijk[:, 0] * shape[1] + ijk[:, 1]) * shape[2] + ijk[:, 2]
+        x = np.subtract(p_G, self.origin)
+        np.divide(x, self.resolution, out=x)
+        ijk = np.rint(x, out=x).astype(np.intp)  # in place: a search looks up millions of points
+        np.maximum(ijk, 0, out=ijk)
+        np.minimum(ijk, shape - 1, out=ijk)
+        ijk[:, 0] *= shape[1]
+        ijk[:, 0] += ijk[:, 1]
+        ijk[:, 0] *= shape[2]
+        ijk[:, 0] += ijk[:, 2]
+        return ijk[:, 0]
 
     def lookup(self, p_G: np.ndarray) -> np.ndarray:
         """The finger bits of the voxel of each point (n, 3) in G, 0 off the map (n,)."""
-        return self.bits.ravel()[self.cells(p_G)]
+        return np.take(self.bits.ravel(), self.cells(p_G))
 
 
 def hand_voxels(fingers: tuple[SphereVoxels, ...], workspaces: tuple[FingerWorkspace, ...]) -> HandVoxels:
