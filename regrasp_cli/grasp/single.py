@@ -173,6 +173,7 @@ class HandModel:
         self._palm_probes: tuple[np.ndarray, np.ndarray] | None = None
         self._object_at: bytes | None = None
         self._pair_memo: dict[tuple[frozenset[int], int | None], list[int]] = {}
+        self._pair_hits = [0] * len(self.pair_fingers)  # per collision pair, how often it was found colliding
 
     def voxels(self, workspaces: tuple[FingerWorkspace, ...]) -> tuple[SphereVoxels, ...]:
         """Voxel maps of the fingers' spheres grown by the tip radii (built on first use)."""
@@ -251,16 +252,18 @@ class HandModel:
 
     def collides(self, q: np.ndarray, fingers_placed: set[int], finger: int | None) -> bool:
         """Collision of finger ``finger`` (or of the whole hand when None) with the object,
-        the palm and the ``fingers_placed``.  The pair found colliding moves to the front
-        of its list: the next check of that finger tries it first (most collisions of a
-        search are one finger's proximal phalanx against its neighbour's, checked last in
-        model order); the verdict does not depend on the order."""
+        the palm and the ``fingers_placed``.  The pairs are tried most often colliding
+        first (most collisions of a search are one finger's proximal phalanx against its
+        neighbour's, last in model order); the verdict does not depend on the order."""
         pin.updateGeometryPlacements(self.robot.model, self.data, self.gm, self.gd, self.robot.to_pin(q))
         pairs = self._pairs(frozenset(fingers_placed), finger)
         for i, k in enumerate(pairs):
             if pin.computeCollision(self.gm, self.gd, k):
-                if i:
-                    pairs.insert(0, pairs.pop(i))
+                hits = self._pair_hits
+                hits[k] += 1
+                while i and hits[pairs[i - 1]] < hits[k]:  # up past the pairs colliding less often
+                    pairs[i - 1], pairs[i] = k, pairs[i - 1]
+                    i -= 1
                 return True
         return False
 
