@@ -225,9 +225,11 @@ def test_is_force_closure_agrees_with_the_hull_on_random_grasps():
 
 
 def test_force_closure_epsilon_is_that_of_qhulls_default_hull():
-    """The hull is built without Qhull's pre-merging (a third of the time) and with its
-    default where that fails: the same verdict and epsilon as the default's, on random
-    grasps and on contacts on a box's faces (coplanar wrenches, where pre-merging matters)."""
+    """The epsilon comes from a hull of a few wrenches grown until its nearest facet is
+    the whole hull's, hulls built without Qhull's pre-merging (a third of the time) and with
+    its default where that fails: the same verdict and epsilon as the default's hull of
+    every wrench, on random grasps and on contacts on a box's faces (coplanar wrenches,
+    where pre-merging matters)."""
     from scipy.spatial import ConvexHull, QhullError
 
     rng = np.random.default_rng(11)
