@@ -145,9 +145,8 @@ class HandModel:
             self.erosion.append(0.0)
         pairs_of = {f: [] for f in range(-1, len(h.finger_idx))}
         self.pair_fingers = []
-        for a in range(n):
-            gm.addCollisionPair(pin.CollisionPair(a, self.obj))
-            self.pair_fingers.append((self.owner[a], None))
+        # the hand's own pairs first: checked in this order, and most collisions of a search
+        # are a finger's proximal phalanx against its neighbour's, cheap shapes
         for a in range(n):
             for b in range(a + 1, n):
                 fa, fb = self.owner[a], self.owner[b]
@@ -155,6 +154,9 @@ class HandModel:
                     continue
                 gm.addCollisionPair(pin.CollisionPair(true[a], true[b]))
                 self.pair_fingers.append((fa, fb))
+        for a in range(n):
+            gm.addCollisionPair(pin.CollisionPair(a, self.obj))
+            self.pair_fingers.append((self.owner[a], None))
         self.gm, self.gd = gm, gm.createData()
         cold_start(self.gd)
         for k, (a, b) in enumerate((p.first, p.second) for p in gm.collisionPairs):
@@ -173,7 +175,6 @@ class HandModel:
         self._palm_probes: tuple[np.ndarray, np.ndarray] | None = None
         self._object_at: bytes | None = None
         self._pair_memo: dict[tuple[frozenset[int], int | None], list[int]] = {}
-        self._pair_hits = [0] * len(self.pair_fingers)  # per collision pair, how often it was found colliding
 
     def voxels(self, workspaces: tuple[FingerWorkspace, ...]) -> tuple[SphereVoxels, ...]:
         """Voxel maps of the fingers' spheres grown by the tip radii (built on first use)."""
@@ -252,18 +253,10 @@ class HandModel:
 
     def collides(self, q: np.ndarray, fingers_placed: set[int], finger: int | None) -> bool:
         """Collision of finger ``finger`` (or of the whole hand when None) with the object,
-        the palm and the ``fingers_placed``.  The pairs are tried most often colliding
-        first (most collisions of a search are one finger's proximal phalanx against its
-        neighbour's, last in model order); the verdict does not depend on the order."""
+        the palm and the ``fingers_placed``."""
         pin.updateGeometryPlacements(self.robot.model, self.data, self.gm, self.gd, self.robot.to_pin(q))
-        pairs = self._pairs(frozenset(fingers_placed), finger)
-        for i, k in enumerate(pairs):
+        for k in self._pairs(frozenset(fingers_placed), finger):
             if pin.computeCollision(self.gm, self.gd, k):
-                hits = self._pair_hits
-                hits[k] += 1
-                while i and hits[pairs[i - 1]] < hits[k]:  # up past the pairs colliding less often
-                    pairs[i - 1], pairs[i] = k, pairs[i - 1]
-                    i -= 1
                 return True
         return False
 
