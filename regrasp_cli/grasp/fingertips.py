@@ -122,7 +122,7 @@ def _candidates(voxels: HandVoxels, finger: int, ws: FingerWorkspace, inside: tu
     n_G = np.take(normals_G.reshape(-1, 3), flat, axis=0)
     tips = np.take(points_G.reshape(-1, 3), flat, axis=0)
     tips += r_tip * n_G
-    facing = -np.einsum("ij,ij->i", n_G, np.take(voxels.closing[finger], voxels.cells(tips), axis=0))  # zero off the map
+    facing = -np.einsum("ij,ij->i", n_G, voxels.closing(finger, voxels.cells(tips)))  # zero off the finger's map
     keep = np.flatnonzero(facing > FACING_COS)
     fi, si, rank, tips = fi[keep], si[keep], facing[keep], tips[keep]
     if anchor is not None:

@@ -180,7 +180,8 @@ class HandModel:
         """Voxel maps of the fingers' spheres grown by the tip radii (built on first use)."""
         if self._voxels is None or self._voxels[0] != id(workspaces):
             tips = [f.tip_radius for f in self.hand.spec.fingers]
-            fingers = tuple(sphere_voxels(ws, r) for ws, r in zip(workspaces, tips))
+            fingers = tuple(ws.voxels if ws.voxels is not None and ws.voxels.inflate == r else sphere_voxels(ws, r)
+                            for ws, r in zip(workspaces, tips))  # cached with the workspaces
             self._voxels = (id(workspaces), fingers, hand_voxels(fingers, workspaces))
         return self._voxels[1]
 

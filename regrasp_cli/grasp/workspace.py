@@ -18,7 +18,7 @@ Computed once per hand and cached (HDF5, keyed by the hand's own inputs,
 from __future__ import annotations
 
 import itertools
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from functools import cached_property
 from pathlib import Path
 
@@ -32,7 +32,9 @@ from regrasp_cli.spatial import inverse
 from regrasp_cli.model.handshape import hand_inputs
 from regrasp_cli.store import Provenance, is_fresh, read_artefact, robot_label, sha256_params, write_artefact
 
-FORMAT, FORMAT_VERSION = "regrasp.workspace", 5  # 5: redundant fingers fix their trailing joints when the leading leave a plane
+FORMAT, FORMAT_VERSION = "regrasp.workspace", 6  # 6: with each finger's voxel map
+VOXEL_RESOLUTION = 0.002  # m: the side of a voxel of the fingers' maps
+_STORED = ("centres", "radii", "samples", "sample_q", "sample_closing", "root")
 
 
 @dataclass(frozen=True)
@@ -59,6 +61,7 @@ class FingerWorkspace:
     sample_q: np.ndarray
     sample_closing: np.ndarray
     root: np.ndarray  # (3,) position in G of the finger's first joint
+    voxels: "SphereVoxels | None" = None  # the spheres grown by the fingertip's radius (:func:`hand_workspace`)
 
     @cached_property
     def tree(self) -> cKDTree:
@@ -77,6 +80,8 @@ class SphereVoxels:
     origin: np.ndarray  # (3,) centre of voxel (0, 0, 0), frame G
     resolution: float  # m
     index: np.ndarray  # (nx, ny, nz) int16, -1 where no sphere
+    inflate: float = 0.0  # m the spheres are grown by
+    nearest: np.ndarray | None = None  # (nx, ny, nz) int32: the interior sample nearest to each voxel's centre, -1 off the map
 
     def lookup(self, p_G: np.ndarray) -> np.ndarray:
         """Index of the biggest sphere holding each point (n, 3) in G, or -1 (n,)."""
@@ -99,7 +104,13 @@ class HandVoxels:
     origin: np.ndarray  # (3,) centre of voxel (0, 0, 0), frame G
     resolution: float  # m
     bits: np.ndarray  # (nx, ny, nz) uint32
-    closing: np.ndarray  # (n_fingers, nx * ny * nz, 3) float32, unit or zero, frame G
+    nearest: np.ndarray  # (n_fingers, nx * ny * nz) int32: finger f's sample nearest to the voxel, -1 off its map
+    directions: tuple[np.ndarray, ...]  # per finger, its samples' closing directions (m + 1, 3) float32, frame G, last zero
+
+    def closing(self, finger: int, cells: np.ndarray) -> np.ndarray:
+        """The closing direction (c, 3) of ``finger`` at the voxels ``cells`` (c,) (:meth:`cells`):
+        that of its interior sample nearest to the voxel, zero off its map."""
+        return np.take(self.directions[finger], np.take(self.nearest[finger], cells), axis=0)
 
     def cells(self, p_G: np.ndarray) -> np.ndarray:
         """Flat index into the maps' one-voxel border of each point (n, 3) in G: points
@@ -122,34 +133,31 @@ class HandVoxels:
 
 
 def hand_voxels(fingers: tuple[SphereVoxels, ...], workspaces: tuple[FingerWorkspace, ...]) -> HandVoxels:
-    """The fingers' maps (on one lattice, of one resolution) as one map of finger bits,
-    with the closing direction of each finger's interior sample nearest to each voxel of
-    its map, and a border of one empty voxel all round."""
+    """The fingers' maps (on one lattice, of one resolution, with their nearest samples:
+    :func:`sphere_voxels`) as one map of finger bits, with the closing direction of each
+    finger's interior sample nearest to each voxel of its map, and a border of one empty
+    voxel all round."""
     res = fingers[0].resolution
     lo = np.rint(np.min([v.origin for v in fingers], axis=0) / res).astype(int) - 1
     hi = np.rint(np.max([v.origin / res + v.index.shape for v in fingers], axis=0)).astype(int) + 1
     bits = np.zeros(tuple(hi - lo), dtype=np.uint32)
     nearest = np.full((len(fingers), *bits.shape), -1, dtype=np.int32)
-    for f, (v, ws) in enumerate(zip(fingers, workspaces)):
+    for f, v in enumerate(fingers):
         a = np.rint(v.origin / res).astype(int) - lo
         b = a + v.index.shape
         bits[a[0]:b[0], a[1]:b[1], a[2]:b[2]] |= (v.index >= 0).astype(np.uint32) << f
-        ijk = np.argwhere(v.index >= 0)
-        if len(ijk) and len(ws.samples):
-            block = nearest[f, a[0]:b[0], a[1]:b[1], a[2]:b[2]]
-            block[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = ws.tree.query(v.origin + res * ijk)[1]
-    nearest = nearest.reshape(len(fingers), -1)
-    closing = np.zeros((*nearest.shape, 3), dtype=np.float32)
-    for f, ws in enumerate(workspaces):
-        on = nearest[f] >= 0
-        closing[f, on] = ws.sample_closing[nearest[f, on]]
-    return HandVoxels(lo * res, res, bits, closing)
+        if v.nearest is not None:
+            nearest[f, a[0]:b[0], a[1]:b[1], a[2]:b[2]] = v.nearest
+    directions = tuple(np.vstack([ws.sample_closing, np.zeros((1, 3))]).astype(np.float32) for ws in workspaces)
+    return HandVoxels(lo * res, res, bits, nearest.reshape(len(fingers), -1), directions)
 
 
-def sphere_voxels(ws: "FingerWorkspace", inflate: float, resolution: float = 0.002) -> SphereVoxels:
-    """The voxel map of ``ws``'s spheres grown by ``inflate`` (m)."""
+def sphere_voxels(ws: "FingerWorkspace", inflate: float, resolution: float = VOXEL_RESOLUTION) -> SphereVoxels:
+    """The voxel map of ``ws``'s spheres grown by ``inflate`` (m), with the interior
+    sample nearest to each of its voxels (when ``ws`` has samples)."""
     if len(ws.radii) == 0:
-        return SphereVoxels(np.zeros(3), resolution, -np.ones((1, 1, 1), dtype=np.int16))
+        return SphereVoxels(np.zeros(3), resolution, -np.ones((1, 1, 1), dtype=np.int16), inflate,
+                            -np.ones((1, 1, 1), dtype=np.int32))
     r = ws.radii + inflate
     lo, hi = (ws.centres - r[:, None]).min(axis=0), (ws.centres + r[:, None]).max(axis=0)
     lo = np.floor(lo / resolution) * resolution  # on one lattice for every finger (HandVoxels)
@@ -164,7 +172,11 @@ def sphere_voxels(ws: "FingerWorkspace", inflate: float, resolution: float = 0.0
         X = np.stack(np.meshgrid(*(axes[d][a[d]:b[d]] for d in range(3)), indexing="ij"), axis=-1)
         box = index[a[0]:b[0], a[1]:b[1], a[2]:b[2]]
         box[np.linalg.norm(X - ws.centres[k], axis=-1) <= r[k]] = k
-    return SphereVoxels(lo, resolution, index)
+    nearest = np.full(tuple(shape), -1, dtype=np.int32)
+    ijk = np.argwhere(index >= 0)
+    if len(ijk) and len(getattr(ws, "samples", ())):
+        nearest[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = ws.tree.query(lo + resolution * ijk)[1]
+    return SphereVoxels(lo, resolution, index, inflate, nearest)
 
 
 def _grid(lo: np.ndarray, hi: np.ndarray, total: int) -> np.ndarray:
@@ -383,15 +395,19 @@ def hand_workspace(robot: Robot, hand: str, options: WorkspaceOptions = Workspac
     # overwrite each other's file (the provenance refusing the other's)
     name = f"{robot_label(robot)}-{hand}-{sha256_params(inputs)[:12]}.h5"
     path = None if cache_dir is None else Path(cache_dir) / "workspace" / name
+    tips = [f.tip_radius for f in robot.hands[hand].spec.fingers]
     if path is not None and path.is_file() and is_fresh(path, expected):
         a = read_artefact(path, expected)
-        n = len(robot.hands[hand].spec.fingers)
-        return tuple(FingerWorkspace(*(a[f"finger{i}/{k}"] for k in ("centres", "radii", "samples", "sample_q", "sample_closing", "root")))
-                     for i in range(n))
-    fingers = tuple(finger_workspace(robot, hand, i, options) for i in range(len(robot.hands[hand].spec.fingers)))
+        return tuple(FingerWorkspace(*(a[f"finger{i}/{k}"] for k in _STORED),
+                                     SphereVoxels(a[f"finger{i}/voxel_origin"], VOXEL_RESOLUTION,
+                                                  a[f"finger{i}/voxel_index"], r, a[f"finger{i}/voxel_nearest"]))
+                     for i, r in enumerate(tips))
+    fingers = tuple(finger_workspace(robot, hand, i, options) for i in range(len(tips)))
+    # the voxel maps too (a fifth of a second a hand): they depend on the spheres and the tip radii alone
+    fingers = tuple(replace(f, voxels=sphere_voxels(f, r)) for f, r in zip(fingers, tips))
     if path is not None:
-        groups = {f"finger{i}": {k: getattr(f, k) for k in ("centres", "radii", "samples", "sample_q",
-                                                             "sample_closing", "root")}
+        groups = {f"finger{i}": {**{k: getattr(f, k) for k in _STORED}, "voxel_origin": f.voxels.origin,
+                                 "voxel_index": f.voxels.index, "voxel_nearest": f.voxels.nearest}
                   for i, f in enumerate(fingers)}
         write_artefact(path, expected, {}, groups=groups)
     return fingers
