@@ -86,19 +86,22 @@ def stable_placements(mesh: trimesh.Trimesh, mass_centre: np.ndarray,
     ``mass_centre`` (3,), most stable first (see the module docstring)."""
     hull = mesh.convex_hull
     c = np.asarray(mass_centre, dtype=float)
-    out = []
+    facets = []  # (normal, support offset, vertices on the plane, height of the mass centre)
     for faces in _facets(hull, options.facet_angle):
         n = hull.area_faces[faces] @ hull.face_normals[faces]
         n /= np.linalg.norm(n)
         d = float((hull.vertices @ n).max())  # the support plane: nothing of the object below it
         own = hull.vertices[np.unique(hull.faces[faces])]
         pts = own[own @ n >= d - options.flatness]  # the facet's vertices on the plane
-        if len(pts) < 3:
-            continue
         h = d - float(n @ c)
-        if h <= 0:
-            continue  # the mass centre outside the hull (a bad mass centre): no rest on it
-        R = rotation_aligning(n, np.array([0.0, 0.0, -1.0]))  # the facet faces down
+        if len(pts) >= 3 and h > 0:  # h <= 0: the mass centre outside the hull (a bad mass centre)
+            facets.append((n, d, pts, h))
+    if not facets:
+        return []
+    down = np.tile([0.0, 0.0, -1.0], (len(facets), 1))
+    turns = rotation_aligning(np.array([f[0] for f in facets]), down)  # each facet facing down, in one call
+    out = []
+    for (n, d, pts, h), R in zip(facets, turns):
         p2 = (pts @ R.T)[:, :2]
         q2 = (R @ c)[:2]
         try:
