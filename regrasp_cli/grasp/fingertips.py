@@ -252,8 +252,9 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
     live = []
     buried = _buried(hm, X_OG, distance)
     stats["buried"] = int(buried.sum())
+    X_JO = hm.object_in_joint(X_OG)
     for b in np.flatnonzero(~buried):  # the palm inside the object: no grasp from this frame
-        hm.set_object(X_OG[b])
+        hm.set_object(X_OG[b], X_JO[b])
         if hm.collides(hm.q, set(), -1):
             stats["palm"] += 1
         else:
@@ -308,7 +309,7 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
                     continue
                 qf = q[frame].copy()
                 qf[idx] = Q[k]
-                hm.set_object(X_OG[frame])
+                hm.set_object(X_OG[frame], X_JO[frame])
                 if hm.collides(qf, placed[frame], f):
                     stats["collisions"] += 1
                     continue
@@ -329,7 +330,7 @@ def grasps_for_frames(hm: HandModel, workspaces: tuple[FingerWorkspace, ...], su
         if in_contact[frame].sum() < need:
             stats["few_contacts"] += 1
             continue
-        hm.set_object(X_OG[frame])
+        hm.set_object(X_OG[frame], X_JO[frame])
         if hm.collides(q[frame], set(range(n_f)), None):
             stats["hand_collision"] += 1
             continue

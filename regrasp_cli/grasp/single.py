@@ -233,13 +233,24 @@ class HandModel:
         self.voxels(workspaces)
         return self._voxels[2]
 
-    def set_object(self, X_OG: np.ndarray) -> None:
-        """Place the object so that the grasp frame is at X_OG in the object frame."""
+    def set_object(self, X_OG: np.ndarray, X_JO: np.ndarray | None = None) -> None:
+        """Place the object so that the grasp frame is at X_OG in the object frame; ``X_JO``,
+        the object in the grasp frame's joint, when the caller has it (:meth:`object_in_joint`)."""
         key = X_OG.tobytes()
         if key != self._object_at:  # a search checks several candidates of one frame in a row
-            X_JO = self.X_JG @ inverse(X_OG)
+            if X_JO is None:
+                X_JO = self.X_JG @ inverse(X_OG)
             self.gm.geometryObjects[self.obj].placement = pin.SE3(X_JO[:3, :3].copy(), X_JO[:3, 3].copy())
             self._object_at = key
+
+    def object_in_joint(self, X_OG: np.ndarray) -> np.ndarray:
+        """The object's placements X_JO (F, 4, 4) in the grasp frame's joint for the grasp
+        frames X_OG (F, 4, 4), in one array operation."""
+        X_GO = np.zeros_like(X_OG)
+        X_GO[:, :3, :3] = X_OG[:, :3, :3].transpose(0, 2, 1)
+        X_GO[:, :3, 3] = -np.einsum("bji,bj->bi", X_OG[:, :3, :3], X_OG[:, :3, 3])
+        X_GO[:, 3, 3] = 1.0
+        return self.X_JG @ X_GO
 
     def _pairs(self, fingers_placed: frozenset[int], finger: int | None) -> list[int]:
         """The collision pairs :meth:`collides` checks (memoised)."""

@@ -12,6 +12,7 @@ pinocchio's to rounding (tests/model/test_chain.py).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -71,9 +72,20 @@ def _motion(axis: np.ndarray, prismatic: bool, v: np.ndarray) -> np.ndarray:
         M[:, :3, 3] = v[:, None] * axis
         return M
     c, s = np.cos(v), np.sin(v)
-    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    M[:, :3, :3] = np.eye(3) + s[:, None, None] * K + (1 - c)[:, None, None] * (K @ K)  # Rodrigues
+    K, K2 = _cross_matrices(*axis)
+    M[:, :3, :3] = _EYE3 + s[:, None, None] * K + (1 - c)[:, None, None] * K2  # Rodrigues
     return M
+
+
+_EYE3 = np.eye(3)
+
+
+@lru_cache(maxsize=256)
+def _cross_matrices(x: float, y: float, z: float) -> tuple[np.ndarray, np.ndarray]:
+    """The cross-product matrix K of the axis (x, y, z) and K @ K (a finger's IK asks for
+    them thousands of times)."""
+    K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
+    return K, K @ K
 
 
 def read_chain(robot: Robot, reference_frame: int, tip_frame: int, dofs: np.ndarray, q: np.ndarray) -> Chain:
