@@ -171,6 +171,7 @@ class _SupportClear:
 
         self.robot, self.hand = problem.robot, hand
         self.tolerance = problem.spec.planning.contact_tolerance
+        self.planes = np.array([[*n, d] for n, d in supports]).reshape(-1, 4)
         size = 4.0  # m: a slab far wider than any hand, under the support plane
         self.slabs = []
         for n, d in supports:
@@ -187,8 +188,13 @@ class _SupportClear:
         if new:  # posed in one call: a call's set-up costs as much as a few hands
             shapes = hand_shapes(self.robot, self.hand, np.array([g.finger_q for g in new]), self.tolerance)
             for g, shape in zip(new, shapes):
-                self.memo[g.frame_index] = np.array([not hand_hits_static(shape, g.X_OG, slab, touching=True)
-                                                     for slab in self.slabs], dtype=bool).reshape(len(self.slabs))
+                # a hand whose geometries' bounding spheres all lie on the object's side of a
+                # support plane clears it; only the others need coal's check against the slab
+                c_O = shape.centres @ g.X_OG[:3, :3].T + g.X_OG[:3, 3]
+                crossing = np.any(c_O @ self.planes[:, :3].T + shape.radii[:, None] >= self.planes[:, 3], axis=0)
+                self.memo[g.frame_index] = np.array([not (cross and hand_hits_static(shape, g.X_OG, slab, touching=True))
+                                                     for cross, slab in zip(crossing, self.slabs)],
+                                                    dtype=bool).reshape(len(self.slabs))
         return np.array([self.memo[g.frame_index] for g in grasps], dtype=int).reshape(-1, len(self.slabs)).sum(axis=0)
 
 
