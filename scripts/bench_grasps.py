@@ -3,10 +3,10 @@
 For each object (the default scene's statuette, the paper's horse and the 16 YCB scans of
 ../shared/meshes/ycb/, the last two benchmark-only and read from outside the repository),
 builds one hand's grasp list with the default options in a fresh grasp cache (the robot's
-self-collision matrix and finger workspaces kept: robot artefacts, built once), with one
-job, and prints per object the frames tried, force-closure grasps, distinct grasps kept,
-the wall time, grasps per second, how many grasps clear each of the object's three most
-stable supports, and the median and the worst object, as a Markdown table.
+self-collision matrix and finger workspaces with their voxel maps kept: robot artefacts,
+built once), with one job, and prints per object the frames tried, force-closure grasps,
+distinct grasps kept, the wall time and grasps per second, and the median and the worst
+object, as a Markdown table.
 
     .venv/bin/python scripts/bench_grasps.py [--jobs 1] [--hand right] [--only mug,horse]
     .venv/bin/python scripts/bench_grasps.py --root ../old   # a worktree of an older commit, same objects
