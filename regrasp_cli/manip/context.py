@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collision_world
+from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collision_world, mesh_geometry
 from regrasp_cli.model.ik import IKOptions
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.model.handshape import palm_and_finger_links
@@ -99,6 +99,7 @@ class Scratch:
         self.local = LocalPlanner(self.options.resolution, self.options.cartesian_step / 2,
                                   joint_reach(self.problem.robot), self.options.coarse_checks)
         self.chains = arm_chains(self.problem.robot)  # the displacement bound per class of pairs
+        self.object_geometry = mesh_geometry(self.problem.object.mesh)  # one BVH for the run's worlds
 
     def world(self, X_PO: np.ndarray | None, attached: str | None = None, touching: tuple[str, ...] = (),
               pair_filter=None, key: str = "", certified: bool = False) -> "Placed":
@@ -112,7 +113,8 @@ class Scratch:
         w = self.worlds.get(k)
         if w is None:
             p = self.problem
-            obj = None if X_PO is None else ObjectPlacement(p.object.mesh, X_PO, attached, tuple(touching))
+            obj = None if X_PO is None else ObjectPlacement(p.object.mesh, X_PO, attached, tuple(touching),
+                                                            self.object_geometry)
             # the holding hand and the object move as one (its fingers do not move while it
             # holds): those pairs were checked when it closed, and cost the most
             rigid = palm_and_finger_links(p.robot, attached) if attached is not None else set()

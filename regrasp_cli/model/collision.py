@@ -64,6 +64,7 @@ class ObjectPlacement:
     X_PO: np.ndarray
     attached_to: str | None = None
     touching: tuple[str, ...] = ()
+    geometry: coal.CollisionGeometry | None = None  # the mesh's BVH (:func:`mesh_geometry`) when the caller has it
 
 
 def mesh_geometry(mesh: trimesh.Trimesh) -> coal.BVHModelOBBRSS:
@@ -89,17 +90,19 @@ def obstacle_geometry(ob: ObstacleSpec) -> coal.CollisionGeometry:
     return mesh_geometry(mesh.mesh)
 
 
-def cold_start(geometry_data: pin.GeometryData) -> None:
-    """Make coal's answers exact and independent of earlier queries.
+def cold_start(geometry_data: pin.GeometryData, distances: bool = True) -> None:
+    """Make coal's answers exact and independent of earlier queries (and its distances'
+    too, unless ``distances`` is False: for data that only checks collisions).
 
     No GJK warm start from the previous query: with pinocchio's cached guesses coal misses
     about 1% of collisions (e.g. two deeply overlapping palm boxes).  Contacts enabled:
     without them coal 3.0.3's early GJK exit missed 2 in 17,548 colliding configurations
     (a palm box against a thumb cylinder, 10 mm deep); with them, none
     (scripts/bench_collision.py, docs/BENCHMARKS.md)."""
+    requests = list(geometry_data.collisionRequests) + (list(geometry_data.distanceRequests) if distances else [])
     with warnings.catch_warnings():  # deprecated in coal, but pinocchio still sets it
         warnings.simplefilter("ignore", DeprecationWarning)
-        for req in list(geometry_data.collisionRequests) + list(geometry_data.distanceRequests):
+        for req in requests:
             req.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
             req.enable_cached_gjk_guess = False
     for req in geometry_data.collisionRequests:
@@ -189,7 +192,7 @@ def _add_object(robot: Robot, gm: pin.GeometryModel, obj: ObjectPlacement) -> tu
         joint, frame = f.parentJoint, fid
         X_JO = f.placement.homogeneous @ obj.X_PO
     go = pin.GeometryObject("object", joint, frame, pin.SE3(X_JO[:3, :3].copy(), X_JO[:3, 3].copy()),
-                            mesh_geometry(obj.mesh))
+                            obj.geometry if obj.geometry is not None else mesh_geometry(obj.mesh))
     return gm.addGeometryObject(go), X_JO @ inverse(obj.X_PO)
 
 
@@ -281,7 +284,7 @@ class CollisionWorld:
     def _checker(self, scale: float) -> tuple[pin.GeometryData, pin.BroadPhaseManager_DynamicAABBTreeCollisionManager]:
         """Geometry data keeping ``scale`` times the model's margins, and its broadphase."""
         gd = self.geometry_model.createData()
-        cold_start(gd)
+        cold_start(gd, distances=False)  # a world checks collisions, never distances
         for k in np.flatnonzero(self.model.margins):
             gd.collisionRequests[int(k)].security_margin = scale * float(self.model.margins[k])
         return gd, pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(self.model.robot.model,
