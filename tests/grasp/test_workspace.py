@@ -177,6 +177,24 @@ def test_hand_workspace_is_cached_in_hdf5(robot, fingers, ws_cache, monkeypatch)
             assert np.array_equal(x, y), name
 
 
+def test_the_cached_voxel_maps_are_the_spheres_grown_by_the_tip_radii(robot, fingers, ws_cache):
+    """Each finger's voxel map comes with its workspace, built and read back from the
+    cache: the map of its spheres grown by its fingertip's radius, each voxel of the map
+    naming the interior sample nearest to its centre."""
+    again = hand_workspace(robot, HAND, OPTIONS, ws_cache)
+    for ws, f in zip(again, robot.hands[HAND].spec.fingers):
+        fresh = ws_mod.sphere_voxels(ws, f.tip_radius)
+        assert ws.voxels.inflate == f.tip_radius
+        assert np.array_equal(ws.voxels.origin, fresh.origin)
+        assert np.array_equal(ws.voxels.index, fresh.index) and np.array_equal(ws.voxels.nearest, fresh.nearest)
+        on = np.argwhere(ws.voxels.index >= 0)[::97]
+        centres = ws.voxels.origin + ws.voxels.resolution * on
+        d = np.linalg.norm(centres[:, None] - ws.samples[None], axis=2)
+        chosen = ws.voxels.nearest[on[:, 0], on[:, 1], on[:, 2]]
+        assert np.allclose(d[np.arange(len(on)), chosen], d.min(axis=1))
+        assert np.all(ws.voxels.nearest[ws.voxels.index < 0] == -1)
+
+
 def test_other_options_are_not_served_from_the_cache(robot, fingers, ws_cache, monkeypatch):
     """The cache is keyed by the options: other options recompute (here: the patched
     function is called) instead of returning the default-options file."""
