@@ -38,7 +38,7 @@ from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.jaw import Jaw, antipodal_pairs, jaw_frames, jaw_geometry, jaw_grasp
 from regrasp_cli.grasp.pads import PadHand, pad_frames, pad_geometry, pad_grasp
 from regrasp_cli.grasp.pinch import pinch_frames
-from regrasp_cli.model.handshape import StaticGeometry, hand_hits_static, hand_inputs, hand_shapes
+from regrasp_cli.model.handshape import hand_hits_static, hand_inputs, hand_shapes, static_geometry_of
 from regrasp_cli.grasp.quality import GraspScores, QualityWeights
 from regrasp_cli.grasp.fingertips import Hints, grasps_for_frames, hints_clear
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel
@@ -171,15 +171,13 @@ class _SupportClear:
 
         self.robot, self.hand = problem.robot, hand
         self.tolerance = problem.spec.planning.contact_tolerance
-        self.planes = np.array([[*n, d] for n, d in supports]).reshape(-1, 4)
         size = 4.0  # m: a slab far wider than any hand, under the support plane
         self.slabs = []
         for n, d in supports:
             X = np.eye(4)
             X[:3, :3] = rotation_aligning(np.array([0.0, 0.0, 1.0]), n)
             X[:3, 3] = (d + size / 2) * n
-            self.slabs.append(StaticGeometry((coal.Box(size, size, size),), X[None], X[None, :3, 3],
-                                             np.array([size])))
+            self.slabs.append(static_geometry_of([coal.Box(size, size, size)], [X]))
         self.memo: dict[int, np.ndarray] = {}
 
     def counts(self, grasps: list[Grasp]) -> np.ndarray:
@@ -188,13 +186,8 @@ class _SupportClear:
         if new:  # posed in one call: a call's set-up costs as much as a few hands
             shapes = hand_shapes(self.robot, self.hand, np.array([g.finger_q for g in new]), self.tolerance)
             for g, shape in zip(new, shapes):
-                # a hand whose geometries' bounding spheres all lie on the object's side of a
-                # support plane clears it; only the others need coal's check against the slab
-                c_O = shape.centres @ g.X_OG[:3, :3].T + g.X_OG[:3, 3]
-                crossing = np.any(c_O @ self.planes[:, :3].T + shape.radii[:, None] >= self.planes[:, 3], axis=0)
-                self.memo[g.frame_index] = np.array([not (cross and hand_hits_static(shape, g.X_OG, slab, touching=True))
-                                                     for cross, slab in zip(crossing, self.slabs)],
-                                                    dtype=bool).reshape(len(self.slabs))
+                self.memo[g.frame_index] = np.array([not hand_hits_static(shape, g.X_OG, slab, touching=True)
+                                                     for slab in self.slabs], dtype=bool).reshape(len(self.slabs))
         return np.array([self.memo[g.frame_index] for g in grasps], dtype=int).reshape(-1, len(self.slabs)).sum(axis=0)
 
 

@@ -14,6 +14,7 @@ checks the fingertips eroded by the tolerance the shapes were made with.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import coal
@@ -144,25 +145,28 @@ def _collide(g1, X1: np.ndarray, g2, X2: np.ndarray) -> bool:
 
 @dataclass(frozen=True)
 class StaticGeometry:
-    """Obstacles as coal geometries with world poses and bounding spheres."""
+    """Obstacles as coal geometries with world poses and bounding boxes (each geometry's
+    local axis-aligned box, posed with it)."""
 
     geometries: tuple[coal.CollisionGeometry, ...]
     X_W: np.ndarray  # (m, 4, 4)
-    centres: np.ndarray  # (m, 3)
-    radii: np.ndarray  # (m,)
+    centres: np.ndarray  # (m, 3) the boxes' centres, frame W
+    half: np.ndarray  # (m, 3) their half sizes, each in its geometry's frame
+
+
+def static_geometry_of(geometries: Sequence[coal.CollisionGeometry], X_W: Sequence[np.ndarray]) -> StaticGeometry:
+    """The geometries at the world poses ``X_W`` (4, 4) each, with their bounding boxes."""
+    X_W = np.array(X_W, dtype=float).reshape(-1, 4, 4)
+    lo, hi = np.zeros((len(X_W), 3)), np.zeros((len(X_W), 3))
+    for k, g in enumerate(geometries):
+        g.computeLocalAABB()
+        lo[k], hi[k] = np.asarray(g.aabb_local.min_), np.asarray(g.aabb_local.max_)
+    centres = np.einsum("mij,mj->mi", X_W[:, :3, :3], (lo + hi) / 2) + X_W[:, :3, 3]
+    return StaticGeometry(tuple(geometries), X_W, centres, (hi - lo) / 2)
 
 
 def static_geometry(obstacles: tuple[ObstacleSpec, ...]) -> StaticGeometry:
-    geoms, poses, centres, radii = [], [], [], []
-    for ob in obstacles:
-        g = obstacle_geometry(ob)
-        g.computeLocalAABB()
-        geoms.append(g)
-        poses.append(ob.X_WO)
-        centres.append(ob.X_WO[:3, :3] @ g.aabb_local.center() + ob.X_WO[:3, 3])
-        radii.append(float(g.aabb_radius))
-    return StaticGeometry(tuple(geoms), np.array(poses).reshape(-1, 4, 4), np.array(centres).reshape(-1, 3),
-                          np.array(radii))
+    return static_geometry_of([obstacle_geometry(ob) for ob in obstacles], [ob.X_WO for ob in obstacles])
 
 
 def hand_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry, clearance: float = 0.0,
@@ -174,8 +178,11 @@ def hand_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry, cl
         return False
     geometries = shape.touch_geometries if touching else shape.geometries
     c = shape.centres @ X_WG[:3, :3].T + X_WG[:3, 3]
-    d = np.linalg.norm(c[:, None] - env.centres[None], axis=2)
-    near = np.argwhere(d <= shape.radii[:, None] + env.radii[None] + clearance)
+    # each hand geometry's bounding sphere against each obstacle's bounding box (a table's
+    # bounding sphere holds most of the hand's reach, its box does not)
+    q = np.einsum("mji,nmj->nmi", env.X_W[:, :3, :3], c[:, None] - env.centres[None])  # (n, m, 3) in the boxes
+    gap = np.linalg.norm(np.maximum(np.abs(q) - env.half[None], 0.0), axis=2)
+    near = np.argwhere(gap <= shape.radii[:, None] + clearance)
     for a, b in near:
         X = X_WG @ shape.X_GL[a]
         if clearance > 0:
