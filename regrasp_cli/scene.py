@@ -28,6 +28,7 @@ class Problem:
     disabled: DisabledPairs
     q_start: np.ndarray  # (nq,) robot start configuration
     q_goal: np.ndarray  # (nq,) robot goal configuration
+    cache_dir: Path | None = None  # where the robot's artefacts (self-collision, reach maps) are cached
 
     @property
     def collision_options(self) -> CollisionOptions:
@@ -84,7 +85,8 @@ def load_problem(path: str | Path, cache_dir: Path | None, progress: PairProgres
                 q[key] = robot.configuration(value, f"task.{key}")
             except InputError as exc:
                 raise InputError(spec.file, exc.field, exc.message) from None
-    return Problem(spec, robot, obj, disabled_pairs(robot, cache_dir, progress), q["robot_start"], q["robot_goal"])
+    return Problem(spec, robot, obj, disabled_pairs(robot, cache_dir, progress), q["robot_start"], q["robot_goal"],
+                   None if cache_dir is None else Path(cache_dir))
 
 
 def obstacles_sha256(obstacles: tuple[ObstacleSpec, ...]) -> str:

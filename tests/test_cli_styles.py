@@ -105,7 +105,7 @@ def test_the_regrasp_count_is_the_least_over_the_graph(cache):
 
 def test_a_forced_style_that_cannot_work_fails_with_its_reason(cache, tmp_path):
     result, plan = _plan(cache, SCENES / "hironx_upside_down.yaml", tmp_path / "plan.json", "--style", "one-arm")
-    line = assert_one_error_line(result, "no one-arm path", "right hand: goal", exit_code=1)
+    line = assert_one_error_line(result, "no hand can hold the object at both", "0 at both", exit_code=1)
     assert "handover" not in line and "place-regrasp" not in line
     assert plan["status"] == "failed"
 
@@ -114,8 +114,9 @@ def test_the_unreachable_scene_fails_at_once_for_every_style(cache, tmp_path):
     result, plan = _plan(cache, SCENES / "hironx_unreachable.yaml", tmp_path / "plan.json")
     line = assert_one_error_line(result, "stage 'grasps'", "one-arm:", "handover:", "place-regrasp:", "goal",
                                  exit_code=1)
-    assert "no hand reaches" in line
+    assert "no hand can hold the object at its goal pose" in line
     assert plan["failure"]["stage"] == "grasps"
+    assert plan["stats"]["counts"]["single_checks"] == 0  # ruled out before any configuration is searched
 
 
 def test_placing_needs_a_support_and_a_stable_placement(cache, tmp_path):

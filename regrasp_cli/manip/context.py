@@ -29,6 +29,7 @@ from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collisi
 from regrasp_cli.model.ik import IKOptions
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.model.handshape import palm_and_finger_links
+from regrasp_cli.model.reachmap import ReachMap, reach_map
 from regrasp_cli.roadmap.compose import margin_rule
 from regrasp_cli.motion.local import LocalPlanner, arm_chains, held_reach, joint_reach
 from regrasp_cli.motion.rrt import RRTOptions
@@ -53,7 +54,6 @@ class OnlineOptions:
     sample_sigma: float = 0.3  # rad: spread of those samples around the rest configuration
     ik_seeds: int = 2  # arm IK from random postures when those from the sample give no grasp
     base_draws: int = 4  # draws of a sample until the non-grasping joints are collision-free
-    exchange_step: float = 0.05  # grid step of the exchange position (Fig. 6)
     exchange_samples: int = 16  # Gaussian samples of the exchange pose per double grasp
     exchange_sigma: float = 0.04  # m, position spread of those samples
     exchange_angle_sigma: float = 0.15  # rad, orientation spread
@@ -100,6 +100,13 @@ class Scratch:
                                   joint_reach(self.problem.robot), self.options.coarse_checks)
         self.chains = arm_chains(self.problem.robot)  # the displacement bound per class of pairs
         self.object_geometry = mesh_geometry(self.problem.object.mesh)  # one BVH for the run's worlds
+        self._reach: dict[str, ReachMap] = {}
+
+    def reach(self, hand: str) -> ReachMap:
+        """The hand's reachable workspace (:mod:`model.reachmap`), from the robot's cache."""
+        if hand not in self._reach:
+            self._reach[hand] = reach_map(self.problem.robot, hand, self.problem.cache_dir)
+        return self._reach[hand]
 
     def world(self, X_PO: np.ndarray | None, attached: str | None = None, touching: tuple[str, ...] = (),
               pair_filter=None, key: str = "", certified: bool = False) -> "Placed":

@@ -90,6 +90,40 @@ def style_of(path: list[Edge]) -> str:
     return "+".join(used) or "one-arm"
 
 
+def ruled_out(style: Style, usable: dict[tuple[str, str], frozenset], placements: bool) -> str:
+    """Why ``style`` cannot succeed, from necessary conditions alone, or "" when it may.
+
+    ``usable[(hand, end)]``: the grasps of ``hand`` that may hold the object at ``end``
+    (START or GOAL), a superset of those with a node there (every node's grasp is among
+    them); ``placements``: whether intermediate placements exist.  Each style's paths
+    need (Harada et al. 2014 §IV-C, Fig. 5): one arm, a node of one hand at both ends
+    with the same grasp (a transfer keeps it); a hand-over, a node of one hand at the
+    start and of the other at the goal; place and regrasp, a node at each end and a
+    placement between."""
+    hands = list(dict.fromkeys(h for h, _ in usable))
+
+    def count(h: str) -> str:
+        return f"{h} hand {len(usable[h, START])} at the start, {len(usable[h, GOAL])} at the goal"
+
+    if not style.handover and not style.placements:
+        if not any(usable[h, START] & usable[h, GOAL] for h in hands):
+            return ("no hand can hold the object at both the start and the goal with one grasp (grasps clear of the "
+                    "obstacles that the arm reaches: " + "; ".join(
+                        f"{count(h)}, {len(usable[h, START] & usable[h, GOAL])} at both" for h in hands) + ")")
+        return ""
+    at = {end: [h for h in hands if usable[h, end]] for end in (START, GOAL)}
+    if not at[START] or not at[GOAL]:
+        end = "start" if not at[START] else "goal"
+        return (f"no hand can hold the object at its {end} pose (no grasp clears the obstacles where the arm "
+                f"reaches: " + "; ".join(count(h) for h in hands) + ")")
+    if style.handover and not style.placements and not any(h != o for h in at[START] for o in at[GOAL]):
+        return ("no hand can hold the object at the start while the other holds it at the goal (grasps clear of the "
+                "obstacles that the arm reaches: " + "; ".join(count(h) for h in hands) + ")")
+    if style.placements and not style.handover and not placements:
+        return "no intermediate placement: the object has no stable placement"
+    return ""
+
+
 def successors(nodes: Iterable[Node], style: Style, compatible: Callable[[Node, Node], bool]):
     """``out(a)`` -> the edges leaving ``a`` (None: the robot's start) among ``nodes``
     that ``style`` allows; ``compatible(a, b)`` says whether two hands' grasps can hold

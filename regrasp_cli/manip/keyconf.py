@@ -32,6 +32,7 @@ import numpy as np
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.model.ik import IKOptions, arm_ik, finger_ik, solve_pose, two_arm_ik
 from regrasp_cli.manip.context import Scratch
+from regrasp_cli.model.reachmap import approach_axis as reach_approach_axis
 from regrasp_cli.spatial import inverse
 
 OTHER = {"right": "left", "left": "right"}
@@ -78,11 +79,7 @@ class ExchangeConfig:
 
 def approach_axis(scratch: Scratch, hand: str) -> np.ndarray:
     """Unit vector (3,) in the grasp frame G from the wrist (the joint carrying G) to G."""
-    robot = scratch.problem.robot
-    X_JG = robot.model.frames[robot.hands[hand].grasp_frame].placement.homogeneous
-    a = X_JG[:3, :3].T @ X_JG[:3, 3]
-    n = np.linalg.norm(a)
-    return a / n if n > 1e-9 else np.array([0.0, 0.0, 1.0])
+    return reach_approach_axis(scratch.problem.robot, hand)
 
 
 def shoulder(scratch: Scratch, hand: str, q: np.ndarray) -> np.ndarray:

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, search, \
-    style_of, successors, type2
+from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, ruled_out, \
+    search, style_of, successors, type2
 
 R0S, R0G = Node("right", 0, START), Node("right", 0, GOAL)
 L1G = Node("left", 1, GOAL)
@@ -128,3 +128,27 @@ def test_the_optimiser_merges_two_transfers_and_two_type2_pairs():
                            Edge(EdgeKind.REGRASP, Node("right", 0, "p2"), q1)]
     # nothing connects: the path is kept as found
     assert optimise(two, lambda edges: False) == two
+
+
+def _usable(rs, rg, ls, lg):
+    """(hand, end) -> grasps usable there: right at start, right at goal, left at start, left at goal."""
+    return {("right", START): frozenset(rs), ("right", GOAL): frozenset(rg), ("left", START): frozenset(ls),
+            ("left", GOAL): frozenset(lg)}
+
+
+def test_styles_are_ruled_out_by_the_grasps_usable_at_each_end():
+    one, over, place = STYLES["one-arm"], STYLES["handover"], STYLES["place-regrasp"]
+    # the default scene: the right hand at the start only, the left at the goal only
+    u = _usable({1, 2}, set(), set(), {3})
+    assert "with one grasp" in ruled_out(one, u, True) and "right hand 2 at the start, 0 at the goal" in \
+        ruled_out(one, u, True)
+    assert ruled_out(over, u, True) == "" and ruled_out(place, u, True) == ""
+    # one hand at both ends, but with different grasps: a transfer keeps the grasp
+    u = _usable({1}, {2}, set(), set())
+    assert ruled_out(one, u, True) and ruled_out(place, u, True) == ""
+    assert "while the other" in ruled_out(over, u, True)
+    assert ruled_out(one, _usable({1, 2}, {2}, set(), set()), False) == ""
+    # nothing at the goal rules out every style; no stable placement, placing
+    u = _usable({1}, set(), {1}, set())
+    assert all("at its goal pose" in ruled_out(s, u, True) for s in (over, place))
+    assert "stable placement" in ruled_out(place, _usable({1}, {2}, set(), set()), False)

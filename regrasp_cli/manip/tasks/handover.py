@@ -32,7 +32,7 @@ from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions, Scratch
 from regrasp_cli.manip.doublegrasp import DoubleGrasp, double_grasps, empty_list_reason, pairable, partners, \
     single_configurations, workable
-from regrasp_cli.manip.exchange import exchange_orientation, exchange_position, grid_nodes
+from regrasp_cli.manip.exchange import exchange_orientation, exchange_position
 from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, single_shape, \
     palm_and_finger_links, static_geometry
 from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, approach_axis, exchange_configuration, shoulder, wrist
@@ -42,7 +42,7 @@ from regrasp_cli.manip.queries import PhaseWorlds, Roadmap
 from regrasp_cli.manip.solve import Outcome, Query, Step, TransitionStats, check_ends, solve_queries, time_steps
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.model.ik import arm_reachable
-from regrasp_cli.motion.local import joint_reach, joint_weights
+from regrasp_cli.motion.local import joint_weights
 from regrasp_cli.parallel import ordered_map
 from regrasp_cli.scene import Problem
 from regrasp_cli.spatial import inverse
@@ -52,6 +52,7 @@ TRANSITIONS = ("grasp", "carry", "place", "rest")  # the four queries of §V-B, 
 RUN_ORDER = ("place", "rest", "grasp", "carry")  # longest first, so that two workers finish together
 STAGES = ("double grasps", "exchange", "queries", "timing")
 EXCHANGE_CLEARANCE = 0.02  # m: the object at the exchange pose keeps this from obstacles
+EXCHANGE_RISE = 0.08  # m: the exchange position is this much above the object's start and goal, at least
 EXCHANGE_YAWS = np.radians([0, 0, 45, -45, 0, 90, -90, 0, 135, -135, 0, 180])  # turns of the samples, in turn
 EXCHANGE_DRAWS = 4  # exchange poses drawn per sample tried: those out of an arm's reach are dropped
 
@@ -92,20 +93,24 @@ def object_shape(problem: Problem) -> HandShape:
 
 def exchange_pose(scratch: Scratch, dg: DoubleGrasp, lists: dict[str, GraspList], env: StaticGeometry,
                   obj: HandShape) -> tuple[np.ndarray | None, int]:
-    """Centre X_WO (4, 4) of the exchange samples: the grid node of least wrist-path cost
-    (Fig. 6) where both arms reach and the object, turned as the grasp directions ask,
-    keeps clear of the obstacles; and the number of grid nodes tested."""
+    """Centre X_WO (4, 4) of the exchange samples: the node of least wrist-path cost
+    (Fig. 6) where both arms reach with the approach directions the pose asks and the
+    object keeps clear of the obstacles; and the number of nodes tested.
+
+    The nodes are the cubes of the arms' reach maps (:mod:`model.reachmap`) that both
+    hands' grasp frames get to, at least ``EXCHANGE_RISE`` above the higher of the object's
+    start and goal (in the air, above its supports); the object's centre goes to the
+    node, turned so that the two grasps' approach directions point as nearly as possible
+    from each shoulder to it (:func:`exchange.exchange_orientation`), and each hand must
+    have been seen in that cube pointing within 50 degrees of its direction."""
     p, robot = scratch.problem, scratch.problem.robot
     g, t = dg.giver.hand, dg.taker.hand
     start, goal = p.spec.task.X_WO_start[:3, 3], p.spec.task.X_WO_goal[:3, 3]
     anchors = np.array([start, goal, wrist(scratch, g, robot.q_rest), wrist(scratch, t, robot.q_rest)])
-    lower, upper = anchors.min(axis=0) - 0.1, anchors.max(axis=0) + 0.1
-    lower[2] = max(start[2], goal[2]) + 0.08
-    upper[2] = max(upper[2], lower[2])
-    nodes = grid_nodes(lower, upper, scratch.options.exchange_step)
-    reach = joint_reach(robot)
+    maps = {h: scratch.reach(h) for h in (g, t)}
+    nodes = maps[g].centres()
+    nodes = nodes[(nodes[:, 2] >= max(start[2], goal[2]) + EXCHANGE_RISE) & maps[t].reaches(nodes)]
     sh = {h: shoulder(scratch, h, robot.q_rest) for h in (g, t)}
-    arm_reach = {h: 0.85 * reach[robot.hands[h].arm_idx[0]] for h in (g, t)}
     a_O = {dg.giver.hand: lists[g].X_OG[dg.giver.grasp, :3, :3] @ approach_axis(scratch, g),
            dg.taker.hand: lists[t].X_OG[dg.taker.grasp, :3, :3] @ approach_axis(scratch, t)}
     poses = {}
@@ -113,13 +118,13 @@ def exchange_pose(scratch: Scratch, dg: DoubleGrasp, lists: dict[str, GraspList]
     def pose(x: np.ndarray) -> np.ndarray:
         X = np.eye(4)
         X[:3, :3] = exchange_orientation(a_O[g], a_O[t], x - sh[g], x - sh[t])
-        X[:3, 3] = x - X[:3, :3] @ obj.centres[0]  # the object's centre at the grid node
+        X[:3, 3] = x - X[:3, :3] @ obj.centres[0]  # the object's centre at the node
         return X
 
     def is_free(x: np.ndarray) -> bool:
-        if any(np.linalg.norm(x - sh[h]) > arm_reach[h] for h in (g, t)):
-            return False
         X = pose(x)
+        if not all(maps[h].reaches(x[None], (X[:3, :3] @ a_O[h])[None])[0] for h in (g, t)):
+            return False
         poses[x.tobytes()] = X
         return not hand_hits_static(obj, X, env, EXCHANGE_CLEARANCE)
 

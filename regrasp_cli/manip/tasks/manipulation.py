@@ -44,8 +44,8 @@ from scipy.spatial import cKDTree
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions, Scratch
 from regrasp_cli.manip.doublegrasp import DoubleGrasp, cheap_order, empty_list_reason, single_configurations, workable
-from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, search, \
-    style_of, successors
+from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, ruled_out, \
+    search, style_of, successors
 from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, SingleConfig, shoulder, single_configuration
 from regrasp_cli.manip.modes import Kind, Mode, Transition
 from regrasp_cli.manip.queries import Roadmap
@@ -155,16 +155,28 @@ class _Graph:
         self.configs.update({Node(hand, c.grasp, pid): c for c in found})
         return found, stats
 
+    def usable(self) -> dict[tuple[str, str], frozenset]:
+        """(hand, START or GOAL) -> the grasps (indices) whose hand clears the obstacles
+        there and that the torso and arm reach (:func:`doublegrasp.workable`, one batched
+        IK per hand and end, memoised for the searches that follow): the only grasps a
+        node there can have."""
+        return {(h, pid): frozenset(int(k) for k in workable(self.scratch, self.lists[h], self.shapes[h],
+                                                            self.placements[pid], self.env)[1])
+                for h in HANDS for pid in (START, GOAL)}
+
     def _grasps_at(self, hand: str, pid: str) -> np.ndarray:
         """The grasps (sorted indices) of the hand's nodes at placement ``pid``."""
         return np.array(sorted({n.grasp for n in self.configs if n.hand == hand and n.placement == pid}), dtype=int)
 
     def one_arm_nodes(self) -> None:
-        """The nodes a one-arm path can use, cheaply: each hand at the end nearer its
-        shoulder (searched in full), then at the other end only with the grasps it has
+        """The nodes a one-arm path can use, cheaply: each hand with a grasp usable at
+        both ends (:meth:`usable`) at the end nearer its shoulder (searched in full), then at the other end only with the grasps it has
         at the first (a transfer keeps the grasp), when it has any.  IK that fails is
         the slow part: a hand that cannot do both ends fails on a few grasps, not 80."""
+        usable = self.usable()
         for hand in HANDS:
+            if not usable[hand, START] & usable[hand, GOAL]:
+                continue  # no grasp serves both ends: its nodes cannot make a one-arm path
             d = {pid: np.linalg.norm(self.placements[pid][:3, 3] - self.shoulder[hand]) for pid in (START, GOAL)}
             first, second = sorted(d, key=d.get)
             self.add_nodes([first], hands=(hand,))
@@ -593,7 +605,9 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     a hand-over (one; the hand-over task of Saut et al. 2010, whose double grasps and
     exchange search are tuned for it), then intermediate placements (one or more); the
     first that succeeds is the plan, and ``counts["styles"]`` says why the ones before
-    it were not used.  The manipulation graph (nodes, blocked edges) is shared by the
+    it were not used.  A style that necessary conditions rule out (:func:`graph.ruled_out`
+    over the grasps usable at each end, :meth:`_Graph.usable`: one batched IK per hand and
+    end, ~50 ms) is not tried.  The manipulation graph (nodes, blocked edges) is shared by the
     styles; ``keep["graph"]`` receives it (for :func:`exhaustive_minimum`)."""
     task = problem.spec.task
     scratch = Scratch(problem, options)
@@ -608,7 +622,16 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     if keep is not None:
         keep["graph"] = g
     why, clock, last = {}, {}, None
+    t0 = time.perf_counter()
+    usable = g.usable()
+    tick(clock, "styles: necessary conditions", t0)
     for name in LEVELS[graph.style]:
+        cannot = ruled_out(STYLES[name], usable, bool(stable))
+        if cannot:
+            why[name] = cannot
+            last = Outcome(TASK, placements=dict(g.placements), counts=dict(g.counts),
+                           failure=PlanningFailed(Stage.GRASPS, cannot))
+            continue
         if name == "handover":
             t0 = time.perf_counter()
             g.handover_nodes()
@@ -620,9 +643,6 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
                 out = replace(out, stages={**nodes, **out.stages})
             if out.failure is None:
                 out = replace(out, counts=dict(out.counts, style="handover", regrasps=1, placements=0))
-        elif name == "place-regrasp" and not stable:
-            out = Outcome(TASK, failure=PlanningFailed(Stage.GRASPS, "no intermediate placement: the object has no "
-                                                                     "stable placement"))
         else:
             out = _graph_plan(g, stable, STYLES[name])
         clock.update({f"{name}: {k}": v for k, v in out.stages.items()})
