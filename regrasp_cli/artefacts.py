@@ -10,6 +10,7 @@ with the reason from the build's counters.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Protocol
 
@@ -166,10 +167,25 @@ def load_artefacts(scene: Path, cache_dir: Path, problem: Problem, build: bool, 
     art = None
     if need_roadmap:
         r_opts = roadmap_options(spec, roadmap_nodes, False, None)
-        art, hashes["roadmap"] = _cached(
-            rb.artefact_path(cache_dir, problem, r_opts), rb.provenance(problem, r_opts), build,
-            lambda: builder.roadmap(scene, cache_dir, r_opts, jobs), rb.read_roadmap, builder)
+        path = rb.artefact_path(cache_dir, problem, r_opts)
+        reuse = None if path.is_file() else rb.nearest_roadmap(cache_dir, problem, r_opts)
+        if reuse is not None:  # a few obstacles moved: revalidated online, not rebuilt
+            with artefact_lock(reuse.path, create=False):
+                art = replace(rb.read_roadmap(reuse.path, reuse.provenance), unchecked=reuse.unchecked)
+                hashes["roadmap"] = sha256_file(reuse.path)
+            builder.notice(f"roadmap: reusing {reuse.path.name}, built for other obstacles ({_changes(reuse)}); the "
+                           f"queries check them online (`regrasp roadmap build` builds one for this scene)")
+        else:
+            art, hashes["roadmap"] = _cached(path, rb.provenance(problem, r_opts), build,
+                                             lambda: builder.roadmap(scene, cache_dir, r_opts, jobs), rb.read_roadmap,
+                                             builder)
     return lists, art, hashes
+
+
+def _changes(reuse) -> str:
+    moved = f"{len(reuse.unchecked)} moved or added: {', '.join(reuse.unchecked)}" if reuse.unchecked else ""
+    gone = f"{reuse.removed} removed" if reuse.removed else ""
+    return "; ".join(x for x in (moved, gone) if x)
 
 
 def _cached(path: Path, prov, build: bool, make, read, builder: Builder):

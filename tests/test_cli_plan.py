@@ -349,3 +349,21 @@ def test_rrt_connect_solves_the_default_scene(solved, cache_dir, plan_dir):
     assert "roadmap" not in p.stats["artefacts"]  # no roadmap was loaded
     report = validate_plan(out)
     assert report.valid, [str(i) for i in report.issues]
+
+
+def test_a_moved_obstacle_reuses_the_roadmap_and_the_plan_is_valid(default_plan, cache_dir, tmp_path):
+    """The vase moved 5 cm: the default scene's roadmap is reused, not rebuilt (with
+    --no-build a rebuild would be refused), the queries check the vase online, and the
+    plan passes the checker, which knows where the vase now stands."""
+    s = scene_dict()
+    for ob in s["obstacles"]:
+        if ob["name"].startswith("vase"):
+            ob["pose"]["xyz"][1] += 0.05
+    scene = write_scene(tmp_path / "moved.yaml", s)
+    out = tmp_path / "plan.json"
+    result = run("--cache-dir", cache_dir, "plan", scene, "-o", out, *SMALL, "--seed", 0, "--no-build")
+    assert result.exit_code == 0, (result.output, result.exception)
+    assert "roadmap: reusing" in result.stdout and "vase_body, vase_neck" in result.stdout
+    assert "\nvalid" in result.stdout or result.stdout.startswith("valid")
+    used = json.loads(out.read_text())["stats"]["artefacts"]["roadmap"]
+    assert used == json.loads(default_plan.read_text())["stats"]["artefacts"]["roadmap"]

@@ -312,7 +312,7 @@ class CliBuilder:
         self.console = console
 
     def notice(self, message: str) -> None:
-        self.console.print(message, markup=False, highlight=False)
+        self.console.print(message, markup=False, highlight=False, soft_wrap=True)
 
     def grasps(self, scene: Path, cache_dir: Path, hand: str, options) -> None:
         build_grasp_lists(scene, cache_dir, [hand], options, self.console)

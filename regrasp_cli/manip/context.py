@@ -87,6 +87,7 @@ class Scratch:
 
     problem: Problem
     options: OnlineOptions
+    unchecked: tuple[str, ...] = ()  # obstacles the roadmap was not built with (Roadmap.unchecked)
     worlds: dict = field(default_factory=dict)
     local: LocalPlanner | None = None
     kin: Kinematics | None = None  # FK scratch of this run

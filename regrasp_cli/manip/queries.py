@@ -60,20 +60,23 @@ class Roadmap:
     lengths: np.ndarray  # (k,) weighted joint-space lengths
     weights: np.ndarray  # (nq,)
     giant: np.ndarray  # (g,) indices of the nodes of the largest connected component
+    unchecked: tuple[str, ...] = ()  # obstacles it was not built with: their pairs are checked lazily
 
     @classmethod
     def of(cls, art: RoadmapArtefact) -> "Roadmap":
         g = art.graph
-        return cls.from_arrays(g.nodes, g.edges, g.lengths, art.weights)
+        return cls.from_arrays(g.nodes, g.edges, g.lengths, art.weights, art.unchecked)
 
     @classmethod
-    def from_arrays(cls, nodes: np.ndarray, edges, lengths, weights: np.ndarray) -> "Roadmap":
+    def from_arrays(cls, nodes: np.ndarray, edges, lengths, weights: np.ndarray,
+                    unchecked: tuple[str, ...] = ()) -> "Roadmap":
         edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
         m = len(nodes)
         adjacency = csr_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(m, m))
         _, label = connected_components(adjacency, directed=False)
         giant = np.flatnonzero(label == np.bincount(label).argmax()) if m else np.zeros(0, dtype=np.int64)
-        return cls(np.asarray(nodes, float), edges, np.asarray(lengths, float), np.asarray(weights, float), giant)
+        return cls(np.asarray(nodes, float), edges, np.asarray(lengths, float), np.asarray(weights, float), giant,
+                   tuple(unchecked))
 
     def shortest_path(self, sources: list[tuple[int, float]], targets: list[tuple[int, float]],
                       memo: QueryMemo) -> list[int] | None:

@@ -5,7 +5,10 @@ Stages: the two elementary roadmaps (in parallel, one process each), the Super G
 nodes, then its edges (in parallel over forked workers, in a fixed order, so the result
 does not depend on the number of jobs).  The roadmap depends on the robot (URDF,
 robot.yaml), the static obstacles and the options, not on the object: its provenance
-hashes exactly those.
+hashes exactly those, each obstacle on its own.  A scene whose obstacles differ from a
+cached roadmap's in a few (moved, added or removed: at most a third of them) reuses it
+(:func:`nearest_roadmap`): the online queries then check the pairs with the moved and
+added obstacles lazily, with the object's (Saut et al. 2010 §V-B), instead of a rebuild.
 
 No silent emptiness: an elementary roadmap or a Super Graph without a node is an
 :class:`~regrasp_cli.errors.EmptyRoadmap` (nothing written) naming the pairs that rejected
@@ -15,6 +18,7 @@ rest configuration in collision, a warning in the :class:`BuildReport`.
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -36,7 +40,7 @@ from regrasp_cli.scene import Problem, load_problem, obstacles_sha256
 from regrasp_cli.store import Provenance, canonical_json, read_artefact, read_provenance, robot_identity, \
     sha256_params, write_artefact
 
-FORMAT, FORMAT_VERSION = "regrasp.roadmap", 1
+FORMAT, FORMAT_VERSION = "regrasp.roadmap", 2  # 2: each obstacle's digest in the provenance
 EDGE_CHUNK = 64
 PROBE = 16  # samples of a segment in Vis-PRM's cheap visibility test
 
@@ -61,6 +65,7 @@ class RoadmapArtefact:
     graph: SuperGraph
     joint_names: tuple[str, ...]
     weights: np.ndarray  # (nq,) of the distance metric
+    unchecked: tuple[str, ...] = ()  # the scene's obstacles it was not built with (:func:`nearest_roadmap`)
 
     def networkx(self) -> nx.Graph:
         """The Super Graph as an undirected networkx graph, edge attribute ``length``."""
@@ -82,17 +87,57 @@ class BuildReport:
 # ------------------------------------------------------------------ provenance
 
 
+def obstacle_digests(obstacles) -> list[str]:
+    """``NAME:DIGEST`` of each obstacle (its shape, size, pose and mesh), sorted."""
+    return sorted(f"{o.name}:{obstacles_sha256((o,))[:16]}" for o in obstacles)
+
+
 def provenance(problem: Problem, options: RoadmapOptions) -> Provenance:
     r = problem.robot
     return Provenance(FORMAT, FORMAT_VERSION, {
         "urdf": r.urdf_sha256, "robot_yaml": r.spec_sha256,
-        "obstacles": obstacles_sha256(problem.spec.obstacles), "params": sha256_params(asdict(options))})
+        "obstacles": canonical_json(obstacle_digests(problem.spec.obstacles)), "params": sha256_params(asdict(options))})
 
 
 def artefact_path(cache_dir: Path, problem: Problem, options: RoadmapOptions) -> Path:
     """``roadmap/<robot identity>-<12 hex digits of the provenance inputs>.h5``."""
     key = sha256_params(dict(provenance(problem, options).inputs))[:12]
     return Path(cache_dir) / "roadmap" / f"{robot_identity(problem.robot)}-{key}.h5"
+
+
+@dataclass(frozen=True)
+class Reuse:
+    """A cached roadmap of the same robot and options built for other obstacles."""
+
+    path: Path
+    provenance: Provenance
+    unchecked: tuple[str, ...]  # the scene's obstacles (names) it was not built with: moved or added
+    removed: int  # obstacles it was built with that the scene does not have
+
+
+def nearest_roadmap(cache_dir: Path, problem: Problem, options: RoadmapOptions) -> Reuse | None:
+    """The cached roadmap of this robot and these options whose obstacles differ least
+    from the scene's, when at most a third of them differ (moved, added or removed; one
+    at least may); None when none does.  Obstacles only removed leave the roadmap valid
+    but sparser where they stood; moved and added ones are revalidated online."""
+    expected = provenance(problem, options)
+    want = set(json.loads(expected.inputs["obstacles"]))
+    best = None
+    for path in sorted((Path(cache_dir) / "roadmap").glob(f"{robot_identity(problem.robot)}-*.h5")):
+        try:
+            found = read_provenance(path)
+            have = set(json.loads(found.inputs.get("obstacles", "null")) or ())
+        except (InputError, ValueError, TypeError):
+            continue  # damaged or foreign: never reused
+        if (found.format, found.format_version) != (FORMAT, FORMAT_VERSION) or any(
+                found.inputs.get(k) != expected.inputs[k] for k in ("urdf", "robot_yaml", "params")):
+            continue
+        added = {d.rsplit(":", 1)[0] for d in want - have}  # moved (the same name elsewhere) or new
+        removed = {d.rsplit(":", 1)[0] for d in have - want} - added
+        cost = len(added) + len(removed)
+        if cost <= max(1, len(want) // 3) and (best is None or cost < best[0]):
+            best = (cost, Reuse(path, found, tuple(sorted(added)), len(removed)))
+    return None if best is None else best[1]
 
 
 # ------------------------------------------------------------------ worlds

@@ -7,6 +7,7 @@ another robot or obstacle set."""
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from regrasp_cli.model.collision import CollisionWorld, collision_world
 from regrasp_cli.model.robot import load_robot
 from regrasp_cli.roadmap import compose
 from regrasp_cli.roadmap.build import (RoadmapArtefact, RoadmapOptions, artefact_path, build_roadmap, load_or_build,
+                                       nearest_roadmap,
                                        provenance, q_base, read_roadmap, summary)
 from regrasp_cli.motion.local import distance
 from regrasp_cli.scene import load_problem
@@ -315,3 +317,58 @@ def test_refused_for_another_urdf(graph_path, problem, tmp_path):
 def test_refused_for_other_options(graph_path, problem):
     with pytest.raises(StaleArtefactError, match="params"):
         read_roadmap(graph_path, provenance(problem, replace(OPTS, seed=OPTS.seed + 1)))
+
+
+# --------------------------------------------------------------------------- reuse for moved obstacles
+
+
+def _variant(tmp_path: Path, name: str, edit) -> Path:
+    d = yaml.safe_load(SCENE_YAML.read_text())
+    edit(d["obstacles"])
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(d, sort_keys=False))
+    return path
+
+
+def _moved(names):
+    def edit(obstacles):
+        for ob in obstacles:
+            if ob["name"] in names:
+                ob["pose"]["xyz"][1] += 0.05
+    return edit
+
+
+def test_a_roadmap_is_reused_when_a_few_obstacles_moved_and_not_when_many(graph, graph_path, cache_dir, tmp_path):
+    """Thirteen obstacles: one or two moved (or one removed) reuse the roadmap, the moved
+    ones to be checked online; five moved (more than a third), other options or another
+    robot do not."""
+    d = tmp_path / "cache"
+    copy_artefacts(Path(cache_dir) / "self_collision", d / "self_collision")
+    (d / "roadmap").mkdir(parents=True)
+    shutil.copy(graph_path, d / "roadmap" / graph_path.name)
+    vase = load_problem(_variant(tmp_path, "vase", _moved({"vase_body", "vase_neck"})), cache_dir)
+    reuse = nearest_roadmap(d, vase, OPTS)
+    assert reuse is not None and reuse.path.name == graph_path.name
+    assert reuse.unchecked == ("vase_body", "vase_neck") and reuse.removed == 0
+    gone = load_problem(_variant(tmp_path, "gone", lambda obs: obs.pop()), cache_dir)
+    reuse = nearest_roadmap(d, gone, OPTS)
+    assert reuse is not None and reuse.unchecked == () and reuse.removed == 1
+    legs = {"desk_leg_fr", "desk_leg_fl", "desk_leg_br", "desk_leg_bl", "vase_body"}
+    assert nearest_roadmap(d, load_problem(_variant(tmp_path, "many", _moved(legs)), cache_dir), OPTS) is None
+    assert nearest_roadmap(d, vase, replace(OPTS, seed=OPTS.seed + 1)) is None
+
+
+def test_the_queries_check_the_moved_obstacles_lazily(problem):
+    """The lazy world of a phase holds the pairs of the obstacles the roadmap was not
+    built with, and those of no other obstacle."""
+    from regrasp_cli.manip.context import OnlineOptions, Scratch
+    from regrasp_cli.manip.tasks.handover import phase_worlds
+
+    robot = problem.robot
+    fingers = {h: robot.hands[h].open for h in ("right", "left")}
+    for unchecked in ((), ("vase_body",)):
+        scratch = Scratch(problem, OnlineOptions(), unchecked)
+        lazy = phase_worlds(scratch, problem.spec.task.X_WO_start, None, fingers).lazy.world
+        names = {lazy.geometry_name(g) for cp in lazy.model.geometry_model.collisionPairs for g in (cp.first, cp.second)}
+        obstacles = {n for n in names if n.startswith("obstacle:")}
+        assert obstacles == {f"obstacle:{n}" for n in unchecked}

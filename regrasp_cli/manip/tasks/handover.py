@@ -147,9 +147,11 @@ def _perturbed(scratch: Scratch, rng: np.random.Generator, X: np.ndarray, obj: H
     return Y
 
 
-def _lazy_filter(object_pairs: bool, hands: set[str]):
-    """Pairs the roadmap did not certify: with the object, or with a link in ``hands``."""
-    return lambda a, b: (object_pairs and "object" in (a, b)) or a in hands or b in hands
+def _lazy_filter(object_pairs: bool, hands: set[str], obstacles: tuple[str, ...] = ()):
+    """Pairs the roadmap did not certify: with the object, with a link in ``hands``, or
+    with one of the ``obstacles`` it was not built with."""
+    fresh = {f"obstacle:{name}" for name in obstacles}
+    return lambda a, b: (object_pairs and "object" in (a, b)) or a in hands or b in hands or a in fresh or b in fresh
 
 
 def phase_worlds(scratch: Scratch, X_PO: np.ndarray, attached: str | None, fingers: dict) -> PhaseWorlds:
@@ -160,7 +162,7 @@ def phase_worlds(scratch: Scratch, X_PO: np.ndarray, attached: str | None, finge
             changed |= palm_and_finger_links(robot, hand)
     touching = (attached,) if attached else ()
     full = scratch.world(X_PO, attached, touching, certified=True)
-    lazy = scratch.world(X_PO, attached, touching, pair_filter=_lazy_filter(True, changed),
+    lazy = scratch.world(X_PO, attached, touching, pair_filter=_lazy_filter(True, changed, scratch.unchecked),
                          key="lazy:" + ",".join(sorted(changed)), certified=True)
     return PhaseWorlds(full, lazy, fingers)
 
@@ -478,10 +480,11 @@ def failed(problem: Problem, failure: PlanningFailed) -> Outcome:
 
 
 def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
-         seed: int, known: dict | None = None) -> Outcome:
+         seed: int, known: dict | None = None, scratch: Scratch | None = None) -> Outcome:
     """Plan the pick, hand-over and place; a failure is the Outcome's ``failure``.
-    ``known``: single-grasp configurations already found (see :func:`_double_grasps`)."""
-    scratch = Scratch(problem, options)
+    ``known``: single-grasp configurations already found (see :func:`_double_grasps`);
+    ``scratch``: the run's scratch when a caller made one (its worlds and memos reused)."""
+    scratch = scratch or Scratch(problem, options, roadmap.unchecked if roadmap is not None else ())
     weights = roadmap.weights if roadmap is not None else joint_weights(problem.robot)
     if options.planner == "ompl-rrtconnect":
         ompl_version()  # InputError now, not after the key configurations, when the extra is missing

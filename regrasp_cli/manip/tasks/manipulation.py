@@ -610,7 +610,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     end, ~50 ms) is not tried.  The manipulation graph (nodes, blocked edges) is shared by the
     styles; ``keep["graph"]`` receives it (for :func:`exhaustive_minimum`)."""
     task = problem.spec.task
-    scratch = Scratch(problem, options)
+    scratch = Scratch(problem, options, roadmap.unchecked if roadmap is not None else ())
     try:
         check_ends(scratch, [(problem.q_start, task.X_WO_start, "start"), (problem.q_goal, task.X_WO_goal, "goal")])
         for h in HANDS:
@@ -639,7 +639,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
             if g.no_handover():
                 out = Outcome(TASK, stages=nodes, failure=PlanningFailed(Stage.GRASPS, g.no_handover()))
             else:
-                out = handover.plan(problem, lists, roadmap, options, seed, g.singles)
+                out = handover.plan(problem, lists, roadmap, options, seed, g.singles, scratch)
                 out = replace(out, stages={**nodes, **out.stages})
             if out.failure is None:
                 out = replace(out, counts=dict(out.counts, style="handover", regrasps=1, placements=0))
