@@ -91,7 +91,7 @@ def test_show_prints_provenance_and_summary(built):
     result = run("roadmap", "show", files[0])
     assert result.exit_code == 0, (result.output, result.exception)
     rows = table_rows(result.stdout)
-    assert rows["format"] == "regrasp.roadmap v1"
+    assert rows["format"] == "regrasp.roadmap v2"
     for key in ("software", "created", "sha256 urdf", "sha256 robot_yaml", "sha256 obstacles", "sha256 params",
                 "R_r (torso + right arm)", "R_l (torso + left arm)", "Super Graph"):
         assert key in rows, key
