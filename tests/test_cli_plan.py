@@ -26,7 +26,7 @@ from cli_helpers import (SMALL, assert_one_error_line, copy_artefacts, needs_sep
 ROOT = Path(__file__).resolve().parents[1]
 SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
 SEED = 0  # the scene's planning.seed
-RRT_SEED = 2  # the baseline does not solve every seed with its default budget; it solves this one
+RRT_SEED = 3  # the baseline does not solve every seed with its default budget; it solves this one
 PHASES = ("grasp", "close_right", "carry", "close_left", "open_right", "place", "open_left", "rest")
 # (kind, holding hands, touching, placement) of each phase: the right hand picks at the start
 # placement, hands over to the left, which places at the goal placement

@@ -36,7 +36,7 @@ from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import Scratch
 from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hands_collide
 from regrasp_cli.model.ik import arm_reachable
-from regrasp_cli.manip.keyconf import SingleConfig, approach_axis, shoulder, single_configuration
+from regrasp_cli.manip.keyconf import SingleConfig, approach_axis, reach_candidates, shoulder, single_configuration
 
 
 @dataclass(frozen=True)
@@ -130,6 +130,9 @@ def single_configurations(scratch: Scratch, rng: np.random.Generator, grasps: Gr
     # with the grasps it could not reach (its postures are farther from the roadmap's)
     for leaning in (False, True)[:1 + lean]:
         pending = [int(k) for k in ks[:attempts] if not any(c.grasp == k for c in found)]
+        if not pending or len(found) >= wanted:
+            break
+        reach = reach_candidates(scratch, rng, grasps, pending, X_WO, leaning)  # every grasp's IK at once
         while pending and len(found) < wanted:
             # spread: the best grasp whose hand overlaps none found so far, else the best
             # (a list's best grasps crowd one side, the top of a statuette: configurations
@@ -137,7 +140,7 @@ def single_configurations(scratch: Scratch, rng: np.random.Generator, grasps: Gr
             k = next((k for k in pending if not any(overlap(k, c.grasp) for c in found)), pending[0])
             pending.remove(k)
             tried += not leaning
-            c = single_configuration(scratch, rng, grasps, k, X_WO, leaning)
+            c = single_configuration(scratch, rng, grasps, k, X_WO, leaning, reach[k])
             if c is not None:
                 found.append(c)
     return found, SingleStats(len(grasps), len(free), len(reached), tried, len(found))

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
-from regrasp_cli.model.ik import IKOptions, arm_ik, finger_ik, solve_pose, two_arm_ik
+from regrasp_cli.model.ik import IKOptions, arm_ik, arm_ik_batch, finger_ik, solve_pose, two_arm_ik
 from regrasp_cli.manip.context import Scratch
 from regrasp_cli.model.reachmap import approach_axis as reach_approach_axis
 from regrasp_cli.spatial import inverse
@@ -258,31 +258,45 @@ def _around_rest(scratch: Scratch, rng: np.random.Generator, idx: np.ndarray) ->
                    robot.upper[idx])
 
 
-def _reaches(scratch: Scratch, rng: np.random.Generator, hand: str, X_WG: np.ndarray, base: np.ndarray,
-             lean: bool):
-    """Configurations (nq,) from ``base`` with ``hand``'s grasp frame at X_WG, lazily: the
-    arm alone (the torso as sampled); or, with ``lean``, the torso and the arm together,
-    then from ``ik_seeds`` random postures: for what the arm alone cannot reach or
-    reaches only contorted (an object low on the desk at arm's length: §V-C samples the
-    non-grasping joints, but a humanoid leans to pick it up)."""
-    robot, o = scratch.problem.robot, scratch.options
+def reach_candidates(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, ks, X_WO: np.ndarray,
+                     lean: bool) -> dict[int, list[np.ndarray]]:
+    """For each grasp k of ``ks``, the configurations (nq,) with the hand's grasp frame at
+    X_WO @ X_OG[k], in the order :func:`single_configuration` tries them: for each of
+    ``key_samples`` samples of the non-grasping joints around rest (§V-C: the torso and
+    the free arm; the rest itself first; one in collision drawn again, up to
+    ``base_draws`` times when leaning; the same samples for every grasp), the arm alone
+    reaching from it (the torso as sampled); or, with ``lean``, the torso and the arm
+    together from it, then from ``ik_seeds`` random postures of both (an object low on
+    the desk at arm's length: a humanoid leans to pick it up).  Every IK of every grasp
+    at once (:func:`~regrasp_cli.model.ik.arm_ik_batch`): one at a time, the IKs of the
+    grasps that fail were most of the time of the nodes."""
+    robot, o, hand = scratch.problem.robot, scratch.options, grasps.hand
+    w_free = scratch.world(X_WO)
     torso = bool(len(robot.groups["torso"]))
-    if not lean:
-        ik = arm_ik(robot, hand, X_WG, base, rng, options=o.ik)
-        if ik.success:
-            yield ik.q
-        return
-    if torso:
-        ik = arm_ik(robot, hand, X_WG, base, rng, with_torso=True, options=o.ik)
-        if ik.success:
-            yield ik.q
-    idx = np.concatenate([robot.groups["torso"], robot.hands[hand].arm_idx])
-    for _ in range(o.ik_seeds):  # other postures (lean, elbow, wrist) for the same hand pose
-        seed = base.copy()
-        seed[idx] = rng.uniform(robot.lower[idx], robot.upper[idx])
-        ik = arm_ik(robot, hand, X_WG, seed, rng, with_torso=torso, options=o.ik)
-        if ik.success:
-            yield ik.q
+    moving = np.concatenate([robot.groups["torso"], robot.hands[OTHER[hand]].arm_idx])
+    posture = np.concatenate([robot.groups["torso"], robot.hands[hand].arm_idx])
+    draws = o.base_draws if lean else 1
+    bases = [next((b for b in (_sample_base(scratch, rng, s, moving) for _ in range(draws)) if w_free.is_free(b)), None)
+             for s in range(o.key_samples)]  # shared by the grasps: where the object is, not how it is held
+    rows, seeds = [], []
+    for k in ks:
+        for base in (b for b in bases if b is not None):
+            starts = [base] if not lean or torso else []
+            for _ in range(o.ik_seeds if lean else 0):  # other postures (lean, elbow, wrist) for the same hand pose
+                seed = base.copy()
+                seed[posture] = rng.uniform(robot.lower[posture], robot.upper[posture])
+                starts.append(seed)
+            rows += [int(k)] * len(starts)
+            seeds += starts
+    out: dict[int, list[np.ndarray]] = {int(k): [] for k in ks}
+    if not rows:
+        return out
+    X_WG = X_WO @ grasps.X_OG[np.array(rows)]
+    Q, ok = arm_ik_batch(robot, hand, X_WG, np.array(seeds), rng, with_torso=lean and torso, options=o.ik)
+    for k, q, good in zip(rows, Q, ok):
+        if good:
+            out[k].append(q)
+    return out
 
 
 def _reach_both(scratch: Scratch, rng: np.random.Generator, hands: tuple[str, str],
@@ -305,24 +319,18 @@ def _reach_both(scratch: Scratch, rng: np.random.Generator, hands: tuple[str, st
 
 
 def single_configuration(scratch: Scratch, rng: np.random.Generator, grasps: GraspList, k: int, X_WO: np.ndarray,
-                         lean: bool = False) -> SingleConfig | None:
+                         lean: bool = False, candidates: list[np.ndarray] | None = None) -> SingleConfig | None:
     """A collision-free configuration grasping the object at X_WO (resting on its support)
     with grasp ``k`` of the hand's list, with its approach and lift lines; None when the
     samples are exhausted.  The arm alone reaches the grasp, or with ``lean`` the torso
-    helps (:func:`_reaches`)."""
-    robot, o, hand = scratch.problem.robot, scratch.options, grasps.hand
-    X_WG = X_WO @ grasps.X_OG[k]
-    w_free = scratch.world(X_WO)
-    moving = np.concatenate([robot.groups["torso"], robot.hands[OTHER[hand]].arm_idx])
-    for s in range(o.key_samples):
-        draws = o.base_draws if lean else 1  # leaning, a free arm drawn through the desk is drawn again
-        base = next((b for b in (_sample_base(scratch, rng, s, moving) for _ in range(draws)) if w_free.is_free(b)), None)
-        if base is None:
-            continue
-        for q in _reaches(scratch, rng, hand, X_WG, base, lean):
-            c = _grasp_at(scratch, rng, grasps, k, X_WO, q, lean)
-            if c is not None:
-                return c
+    helps; ``candidates``: the configurations reaching it, when the caller solved them
+    (:func:`reach_candidates`, for many grasps at once)."""
+    if candidates is None:
+        candidates = reach_candidates(scratch, rng, grasps, [k], X_WO, lean)[k]
+    for q in candidates:
+        c = _grasp_at(scratch, rng, grasps, k, X_WO, q, lean)
+        if c is not None:
+            return c
     return None
 
 

@@ -14,8 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial.transform import Rotation
 
-from regrasp_cli.model.chain import batch_pose_ik, read_chain
+from regrasp_cli.model.chain import batch_dls, batch_pose_ik, read_chain, tip_frames_and_jacobian
 from regrasp_cli.model.robot import Robot
 
 
@@ -180,3 +181,47 @@ def arm_reachable(robot: Robot, hand: str, X_WG: np.ndarray, rng: np.random.Gene
     _, ok = batch_pose_ik(chain, lo, hi, Q0, np.tile(X_WG, (seeds + 1, 1, 1)), options.max_iters,
                           options.tol_position, options.tol_rotation, options.damping)
     return ok.reshape(seeds + 1, B).any(axis=0)
+
+
+def arm_ik_batch(robot: Robot, hand: str, X_WG: np.ndarray, Q_seed: np.ndarray, rng: np.random.Generator,
+                 with_torso: bool = False, options: IKOptions = IKOptions()) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`arm_ik` of every pose X_WG[i] (B, 4, 4) from the configuration Q_seed[i]
+    (B, nq), all at once (batched DLS on :mod:`.chain`): the arm's joints move (and the
+    torso's with ``with_torso``), the others keep their seed values; the first attempt
+    from the seed, then ``options.restarts`` from random values of the moving joints, to
+    the same tolerances.  Returns (B, nq) configurations (the seed where none converged)
+    and (B,) success, the first attempt that converged kept."""
+    h = robot.hands[hand]
+    torso, arm = np.asarray(robot.groups["torso"], dtype=int), np.asarray(h.arm_idx, dtype=int)
+    dofs = np.concatenate([torso, arm])
+    cols = np.arange(len(dofs)) if with_torso else np.arange(len(torso), len(dofs))  # moving, within dofs
+    moving = dofs[cols]
+    chain = read_chain(robot, 0, h.grasp_frame, dofs, robot.q_rest)
+    lo, hi = robot.lower[moving], robot.upper[moving]
+    B, tries = len(X_WG), options.restarts + 1
+    fixed = np.tile(Q_seed[:, dofs], (tries, 1))
+    Q0 = np.concatenate([Q_seed[:, moving], rng.uniform(lo, hi, ((tries - 1) * B, len(moving)))])
+    targets = np.tile(X_WG, (tries, 1, 1))
+
+    def residual(Q, rows):
+        full = fixed[rows].copy()
+        full[:, cols] = Q
+        X, J = tip_frames_and_jacobian(chain, full)
+        # the rotation error as a rotation vector (log map, frame W), as pinocchio's log6
+        # in arm_ik: the sine of chain.pose_error steers large errors another way
+        e_r = Rotation.from_matrix(targets[rows, :3, :3] @ X[:, :3, :3].transpose(0, 2, 1)).as_rotvec()
+        return np.concatenate([targets[rows, :3, 3] - X[:, :3, 3], e_r], axis=1), J[:, :, cols]
+
+    def measure(e):
+        e_p = np.einsum("bi,bi->b", e[:, :3], e[:, :3])
+        e_r = np.einsum("bi,bi->b", e[:, 3:], e[:, 3:])
+        return e_p + e_r, (e_p < options.tol_position**2) & (e_r < options.tol_rotation**2)
+
+    # no give-up on a stall (as arm_ik): a seed that stalls a while would lose to a contorted restart
+    Q, ok, _ = batch_dls(residual, measure, Q0, lo, hi, options.max_iters, options.damping, np.inf, options.max_step)
+    ok = ok.reshape(tries, B)
+    first = np.argmax(ok, axis=0)  # the first attempt that converged (0 when none did)
+    found = ok.any(axis=0)
+    out = np.array(Q_seed, dtype=float)
+    out[np.ix_(found, moving)] = Q.reshape(tries, B, -1)[first, np.arange(B)][found]
+    return out, found
