@@ -6,7 +6,9 @@ position to the exchange position, the other hand comes from where it rests, tak
 there and carries it to the goal.  The terms that do not depend on the exchange position
 x are constant, so the cost is the sum of the distances from x to a few fixed points
 (``anchors``: the object's start and goal positions and the receiving wrist's initial
-position), a Fermat–Weber problem solved on the grid, as in the paper.
+position), a Fermat–Weber problem solved on the grid, as in the paper.  The planner's grid
+is the cubes of the arms' reach maps that both hands get to (:mod:`model.reachmap`,
+:func:`manip.tasks.handover.exchange_pose`); :func:`grid_nodes` makes a box's.
 """
 
 from __future__ import annotations

@@ -96,7 +96,8 @@ def provenance(problem: Problem, options: RoadmapOptions) -> Provenance:
     r = problem.robot
     return Provenance(FORMAT, FORMAT_VERSION, {
         "urdf": r.urdf_sha256, "robot_yaml": r.spec_sha256,
-        "obstacles": canonical_json(obstacle_digests(problem.spec.obstacles)), "params": sha256_params(asdict(options))})
+        "obstacles": canonical_json(obstacle_digests(problem.spec.obstacles)),
+        "params": sha256_params(asdict(options))})
 
 
 def artefact_path(cache_dir: Path, problem: Problem, options: RoadmapOptions) -> Path:

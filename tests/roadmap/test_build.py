@@ -369,6 +369,7 @@ def test_the_queries_check_the_moved_obstacles_lazily(problem):
     for unchecked in ((), ("vase_body",)):
         scratch = Scratch(problem, OnlineOptions(), unchecked)
         lazy = phase_worlds(scratch, problem.spec.task.X_WO_start, None, fingers).lazy.world
-        names = {lazy.geometry_name(g) for cp in lazy.model.geometry_model.collisionPairs for g in (cp.first, cp.second)}
+        pairs = lazy.model.geometry_model.collisionPairs
+        names = {lazy.geometry_name(g) for cp in pairs for g in (cp.first, cp.second)}
         obstacles = {n for n in names if n.startswith("obstacle:")}
         assert obstacles == {f"obstacle:{n}" for n in unchecked}

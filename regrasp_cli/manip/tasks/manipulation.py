@@ -170,9 +170,10 @@ class _Graph:
 
     def one_arm_nodes(self) -> None:
         """The nodes a one-arm path can use, cheaply: each hand with a grasp usable at
-        both ends (:meth:`usable`) at the end nearer its shoulder (searched in full), then at the other end only with the grasps it has
-        at the first (a transfer keeps the grasp), when it has any.  IK that fails is
-        the slow part: a hand that cannot do both ends fails on a few grasps, not 80."""
+        both ends (:meth:`usable`) at the end nearer its shoulder (searched in full), then
+        at the other end only with the grasps it has at the first (a transfer keeps the
+        grasp), when it has any.  IK that fails is the slow part: a hand that cannot do
+        both ends fails on a few grasps, not 80."""
         usable = self.usable()
         for hand in HANDS:
             if not usable[hand, START] & usable[hand, GOAL]:
@@ -606,9 +607,9 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     exchange search are tuned for it), then intermediate placements (one or more); the
     first that succeeds is the plan, and ``counts["styles"]`` says why the ones before
     it were not used.  A style that necessary conditions rule out (:func:`graph.ruled_out`
-    over the grasps usable at each end, :meth:`_Graph.usable`: one batched IK per hand and
-    end, ~50 ms) is not tried.  The manipulation graph (nodes, blocked edges) is shared by the
-    styles; ``keep["graph"]`` receives it (for :func:`exhaustive_minimum`)."""
+    over the grasps usable at each end, :meth:`_Graph.usable`: one batched IK per hand
+    and end, ~50 ms) is not tried.  The manipulation graph (nodes, blocked edges) is
+    shared by the styles; ``keep["graph"]`` receives it (for :func:`exhaustive_minimum`)."""
     task = problem.spec.task
     scratch = Scratch(problem, options, roadmap.unchecked if roadmap is not None else ())
     try:
