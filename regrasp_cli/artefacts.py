@@ -183,7 +183,8 @@ def load_artefacts(scene: Path, cache_dir: Path, problem: Problem, build: bool, 
 
 
 def _changes(reuse) -> str:
-    moved = f"{len(reuse.unchecked)} moved or added: {', '.join(reuse.unchecked)}" if reuse.unchecked else ""
+    moved = f"{len(reuse.unchecked)} moved or added: {', '.join(reuse.unchecked)}, in " \
+            f"{100 * reuse.blocked:.1f} % of its nodes" if reuse.unchecked else ""
     gone = f"{reuse.removed} removed" if reuse.removed else ""
     return "; ".join(x for x in (moved, gone) if x)
 

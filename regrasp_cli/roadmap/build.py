@@ -106,6 +106,9 @@ def artefact_path(cache_dir: Path, problem: Problem, options: RoadmapOptions) ->
     return Path(cache_dir) / "roadmap" / f"{robot_identity(problem.robot)}-{key}.h5"
 
 
+REUSE_BLOCKED = 0.05  # a roadmap is reused when the moved and added obstacles block at most this share of its nodes
+
+
 @dataclass(frozen=True)
 class Reuse:
     """A cached roadmap of the same robot and options built for other obstacles."""
@@ -114,13 +117,28 @@ class Reuse:
     provenance: Provenance
     unchecked: tuple[str, ...]  # the scene's obstacles (names) it was not built with: moved or added
     removed: int  # obstacles it was built with that the scene does not have
+    blocked: float = 0.0  # share of its Super Graph nodes that the unchecked obstacles collide with
+
+
+def blocked_share(problem: Problem, nodes: np.ndarray, names: tuple[str, ...]) -> float:
+    """The share of the configurations ``nodes`` (m, nq) in collision with the scene's
+    obstacles ``names`` (robot-obstacle pairs only)."""
+    if not names or not len(nodes):
+        return 0.0
+    fresh = {f"obstacle:{n}" for n in names}
+    world = collision_world(problem.robot, problem.spec.obstacles, problem.disabled.links(),
+                            pair_filter=lambda a, b: a in fresh or b in fresh)
+    return float(np.mean([not world.is_free(q) for q in nodes]))
 
 
 def nearest_roadmap(cache_dir: Path, problem: Problem, options: RoadmapOptions) -> Reuse | None:
     """The cached roadmap of this robot and these options whose obstacles differ least
     from the scene's, when at most a third of them differ (moved, added or removed; one
-    at least may); None when none does.  Obstacles only removed leave the roadmap valid
-    but sparser where they stood; moved and added ones are revalidated online."""
+    at least may) and the moved and added ones block at most :data:`REUSE_BLOCKED` of its
+    Super Graph nodes; None when none does.  Obstacles only removed leave the roadmap
+    valid but sparser where they stood; moved and added ones are revalidated online,
+    where a few blocked nodes cost a few repairs but many cost more than a rebuild (a
+    box where the hands meet: 40-50 s a plan)."""
     expected = provenance(problem, options)
     want = set(json.loads(expected.inputs["obstacles"]))
     best = None
@@ -138,7 +156,11 @@ def nearest_roadmap(cache_dir: Path, problem: Problem, options: RoadmapOptions) 
         cost = len(added) + len(removed)
         if cost <= max(1, len(want) // 3) and (best is None or cost < best[0]):
             best = (cost, Reuse(path, found, tuple(sorted(added)), len(removed)))
-    return None if best is None else best[1]
+    if best is None:
+        return None
+    reuse = best[1]
+    share = blocked_share(problem, read_roadmap(reuse.path, reuse.provenance).graph.nodes, reuse.unchecked)
+    return replace(reuse, blocked=share) if share <= REUSE_BLOCKED else None
 
 
 # ------------------------------------------------------------------ worlds

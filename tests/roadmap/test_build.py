@@ -340,8 +340,8 @@ def _moved(names):
 
 def test_a_roadmap_is_reused_when_a_few_obstacles_moved_and_not_when_many(graph, graph_path, cache_dir, tmp_path):
     """Thirteen obstacles: one or two moved (or one removed) reuse the roadmap, the moved
-    ones to be checked online; five moved (more than a third), other options or another
-    robot do not."""
+    ones to be checked online; one added where it blocks many nodes, five moved (more
+    than a third), or other options do not."""
     d = tmp_path / "cache"
     copy_artefacts(Path(cache_dir) / "self_collision", d / "self_collision")
     (d / "roadmap").mkdir(parents=True)
@@ -349,7 +349,11 @@ def test_a_roadmap_is_reused_when_a_few_obstacles_moved_and_not_when_many(graph,
     vase = load_problem(_variant(tmp_path, "vase", _moved({"vase_body", "vase_neck"})), cache_dir)
     reuse = nearest_roadmap(d, vase, OPTS)
     assert reuse is not None and reuse.path.name == graph_path.name
-    assert reuse.unchecked == ("vase_body", "vase_neck") and reuse.removed == 0
+    assert reuse.unchecked == ("vase_body", "vase_neck") and reuse.removed == 0 and reuse.blocked <= 0.05
+    # one obstacle added, but where the arms work: it blocks too many of the nodes
+    wall = {"name": "wall", "box": {"size": [0.1, 1.6, 0.5]}, "pose": {"xyz": [0.45, 0.0, 1.15]}}
+    walled = load_problem(_variant(tmp_path, "wall", lambda obs: obs.append(wall)), cache_dir)
+    assert nearest_roadmap(d, walled, OPTS) is None
     gone = load_problem(_variant(tmp_path, "gone", lambda obs: obs.pop()), cache_dir)
     reuse = nearest_roadmap(d, gone, OPTS)
     assert reuse is not None and reuse.unchecked == () and reuse.removed == 1
