@@ -10,7 +10,6 @@ with the reason from the build's counters.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Protocol
 
@@ -170,9 +169,7 @@ def load_artefacts(scene: Path, cache_dir: Path, problem: Problem, build: bool, 
         path = rb.artefact_path(cache_dir, problem, r_opts)
         reuse = None if path.is_file() else rb.nearest_roadmap(cache_dir, problem, r_opts)
         if reuse is not None:  # a few obstacles moved: revalidated online, not rebuilt
-            with artefact_lock(reuse.path, create=False):
-                art = replace(rb.read_roadmap(reuse.path, reuse.provenance), unchecked=reuse.unchecked)
-                hashes["roadmap"] = sha256_file(reuse.path)
+            art, hashes["roadmap"] = reuse.roadmap, sha256_file(reuse.path)
             builder.notice(f"roadmap: reusing {reuse.path.name}, built for other obstacles ({_changes(reuse)}); the "
                            f"queries check them online (`regrasp roadmap build` builds one for this scene)")
         else:

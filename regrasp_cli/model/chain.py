@@ -202,10 +202,16 @@ def batch_pose_ik(chain: Chain, lower: np.ndarray, upper: np.ndarray, Q0: np.nda
         X, J = tip_frames_and_jacobian(chain, Q)
         return pose_error(X, X_target[rows]), J
 
+    Q, ok, _ = batch_dls(residual, pose_measure(tol_position, tol_rotation), Q0, lower, upper, iterations, damping,
+                         0.99, max_step=0.5)
+    return Q, ok
+
+
+def pose_measure(tol_position: float, tol_rotation: float):
+    """``measure(e)`` of :func:`batch_dls` for pose errors e (b, 6) (position, then
+    rotation): their squared norm (b,) and whether both parts are within tolerance (b,)."""
     def measure(e):
         e_p = np.einsum("bi,bi->b", e[:, :3], e[:, :3])
         e_r = np.einsum("bi,bi->b", e[:, 3:], e[:, 3:])
         return e_p + e_r, (e_p < tol_position**2) & (e_r < tol_rotation**2)
-
-    Q, ok, _ = batch_dls(residual, measure, Q0, lower, upper, iterations, damping, 0.99, max_step=0.5)
-    return Q, ok
+    return measure

@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.spatial.transform import Rotation
 
-from regrasp_cli.model.chain import batch_dls, batch_pose_ik, read_chain, tip_frames_and_jacobian
+from regrasp_cli.model.chain import batch_dls, batch_pose_ik, pose_measure, read_chain, tip_frames_and_jacobian
 from regrasp_cli.model.robot import Robot
 
 
@@ -212,13 +212,9 @@ def arm_ik_batch(robot: Robot, hand: str, X_WG: np.ndarray, Q_seed: np.ndarray, 
         e_r = Rotation.from_matrix(targets[rows, :3, :3] @ X[:, :3, :3].transpose(0, 2, 1)).as_rotvec()
         return np.concatenate([targets[rows, :3, 3] - X[:, :3, 3], e_r], axis=1), J[:, :, cols]
 
-    def measure(e):
-        e_p = np.einsum("bi,bi->b", e[:, :3], e[:, :3])
-        e_r = np.einsum("bi,bi->b", e[:, 3:], e[:, 3:])
-        return e_p + e_r, (e_p < options.tol_position**2) & (e_r < options.tol_rotation**2)
-
     # no give-up on a stall (as arm_ik): a seed that stalls a while would lose to a contorted restart
-    Q, ok, _ = batch_dls(residual, measure, Q0, lo, hi, options.max_iters, options.damping, np.inf, options.max_step)
+    Q, ok, _ = batch_dls(residual, pose_measure(options.tol_position, options.tol_rotation), Q0, lo, hi,
+                         options.max_iters, options.damping, np.inf, options.max_step)
     ok = ok.reshape(tries, B)
     first = np.argmax(ok, axis=0)  # the first attempt that converged (0 when none did)
     found = ok.any(axis=0)

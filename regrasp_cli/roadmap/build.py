@@ -118,6 +118,7 @@ class Reuse:
     unchecked: tuple[str, ...]  # the scene's obstacles (names) it was not built with: moved or added
     removed: int  # obstacles it was built with that the scene does not have
     blocked: float = 0.0  # share of its Super Graph nodes that the unchecked obstacles collide with
+    roadmap: RoadmapArtefact | None = None  # as read (with ``unchecked``)
 
 
 def blocked_share(problem: Problem, nodes: np.ndarray, names: tuple[str, ...]) -> float:
@@ -159,8 +160,9 @@ def nearest_roadmap(cache_dir: Path, problem: Problem, options: RoadmapOptions) 
     if best is None:
         return None
     reuse = best[1]
-    share = blocked_share(problem, read_roadmap(reuse.path, reuse.provenance).graph.nodes, reuse.unchecked)
-    return replace(reuse, blocked=share) if share <= REUSE_BLOCKED else None
+    art = replace(read_roadmap(reuse.path, reuse.provenance), unchecked=reuse.unchecked)
+    share = blocked_share(problem, art.graph.nodes, reuse.unchecked)
+    return replace(reuse, blocked=share, roadmap=art) if share <= REUSE_BLOCKED else None
 
 
 # ------------------------------------------------------------------ worlds
