@@ -19,7 +19,13 @@ def pose_matrix(xyz, rpy=None, quat=None) -> np.ndarray:
 
 
 def inverse(X: np.ndarray) -> np.ndarray:
-    """Inverse of a rigid transform (4, 4)."""
+    """Inverse of a rigid transform (4, 4), or of each of a batch (B, 4, 4)."""
+    if X.ndim == 3:
+        Xi = np.zeros_like(X, dtype=float)
+        Xi[:, :3, :3] = X[:, :3, :3].transpose(0, 2, 1)
+        Xi[:, :3, 3] = -np.einsum("bji,bj->bi", X[:, :3, :3], X[:, :3, 3])
+        Xi[:, 3, 3] = 1.0
+        return Xi
     Xi = np.eye(4)
     R = X[:3, :3]
     Xi[:3, :3] = R.T

@@ -246,11 +246,7 @@ class HandModel:
     def object_in_joint(self, X_OG: np.ndarray) -> np.ndarray:
         """The object's placements X_JO (F, 4, 4) in the grasp frame's joint for the grasp
         frames X_OG (F, 4, 4), in one array operation."""
-        X_GO = np.zeros_like(X_OG)
-        X_GO[:, :3, :3] = X_OG[:, :3, :3].transpose(0, 2, 1)
-        X_GO[:, :3, 3] = -np.einsum("bji,bj->bi", X_OG[:, :3, :3], X_OG[:, :3, 3])
-        X_GO[:, 3, 3] = 1.0
-        return self.X_JG @ X_GO
+        return self.X_JG @ inverse(X_OG)
 
     def _pairs(self, fingers_placed: frozenset[int], finger: int | None) -> list[int]:
         """The collision pairs :meth:`collides` checks (memoised)."""
