@@ -50,3 +50,32 @@ def ordered_map(fn: Callable[[Any, T], R], items: Iterable[T], jobs: int, contex
             pool.join()
     finally:
         _RUNNING[0] = previous
+
+
+class Workers:
+    """Forked workers for work whose next items depend on the results so far: ``submit``
+    one item at a time, ask for its result when it is needed.  The context is inherited
+    at the fork, as with :func:`ordered_map`; with jobs <= 1 an item runs in this process
+    when its result is asked for, so a caller that decides what to submit only from the
+    results it has asked for gets the same results whatever the number of jobs."""
+
+    def __init__(self, fn: Callable[[Any, T], R], jobs: int, context: Any = None):
+        self.fn, self.jobs, self.context, self.pool, self.previous = fn, jobs, context, None, None
+
+    def __enter__(self) -> "Workers":
+        if self.jobs > 1:
+            self.previous, _RUNNING[0] = _RUNNING[0], (self.fn, self.context)
+            self.pool = multiprocessing.get_context("fork").Pool(self.jobs)
+        return self
+
+    def submit(self, item: T) -> Callable[[], R]:
+        """Start ``fn(context, item)``; returns the call that waits for its result."""
+        if self.pool is None:
+            return lambda: self.fn(self.context, item)
+        return self.pool.apply_async(_call, (item,)).get
+
+    def __exit__(self, *exc) -> None:
+        if self.pool is not None:
+            self.pool.terminate()
+            self.pool.join()
+            _RUNNING[0] = self.previous

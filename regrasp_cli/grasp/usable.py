@@ -27,10 +27,10 @@ def usable_at_ends(problem: Problem, glist: GraspList, limit: int) -> GraspList:
     poses = (task.X_WO_start, task.X_WO_goal)
     found = [0, 0]  # grasps usable at each pose so far
     keep = []
-    for k in range(len(glist)):
+    shapes = hand_shapes(problem.robot, glist.hand, glist.finger_q, tolerance) if len(glist) else []
+    for k, shape in enumerate(shapes):
         if limit and min(found) >= limit:
             break
-        shape = hand_shapes(problem.robot, glist.hand, glist.finger_q[k], tolerance)[0]
         usable = [(not limit or found[i] < limit)
                   and not hand_hits_static(shape, X_WO @ glist.X_OG[k], env, touching=True)
                   for i, X_WO in enumerate(poses)]

@@ -2,8 +2,10 @@
 HDF5 (Saut et al. 2010, §V-A).
 
 Stages: the two elementary roadmaps (in parallel, one process each), the Super Graph
-nodes, then its edges (in parallel over forked workers, in a fixed order, so the result
-does not depend on the number of jobs).  The roadmap depends on the robot (URDF,
+nodes, then its edges: shortest first, each checked only when the edges accepted so far
+do not already join its ends within ``stretch`` times its length (:func:`_edges`), in
+parallel over forked workers in a fixed protocol, so the result does not depend on the
+number of jobs.  The roadmap depends on the robot (URDF,
 robot.yaml), the static obstacles and the options, not on the object: its provenance
 hashes exactly those, each obstacle on its own.  A scene whose obstacles differ from a
 cached roadmap's in a few (moved, added or removed: at most a third of them) reuses it
@@ -18,8 +20,10 @@ rest configuration in collision, a warning in the :class:`BuildReport`.
 
 from __future__ import annotations
 
+import heapq
 import json
 import time
+from collections import deque
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable
@@ -29,7 +33,7 @@ import numpy as np
 
 from regrasp_cli.errors import EmptyRoadmap, InputError
 from regrasp_cli.model.collision import CollisionWorld, collision_world
-from regrasp_cli.parallel import ordered_map
+from regrasp_cli.parallel import Workers, ordered_map
 from regrasp_cli.roadmap.compose import (LEFT, RIGHT, SuperGraph, UnionFind, candidate_edges, compose_nodes,
                                          edge_kind, involving, link_parts, margin_rule, mixed, part_filter,
                                          subsystem)
@@ -41,7 +45,8 @@ from regrasp_cli.store import Provenance, canonical_json, read_artefact, read_pr
     sha256_params, write_artefact
 
 FORMAT, FORMAT_VERSION = "regrasp.roadmap", 2  # 2: each obstacle's digest in the provenance
-EDGE_CHUNK = 64
+EDGE_CHUNK = 16  # candidate Super Graph edges per task
+EDGE_WINDOW = 4  # tasks in flight
 PROBE = 16  # samples of a segment in Vis-PRM's cheap visibility test
 
 
@@ -50,6 +55,8 @@ class RoadmapOptions:
     nodes: int = 50  # nodes of each elementary roadmap
     max_failures: int = 2000  # Vis-PRM: consecutive dropped samples that end a roadmap early
     tree: bool = False  # Super Graph edges only between different components
+    stretch: float = 1.5  # an edge is checked only when the graph does not already join its ends within
+    # stretch times its length (0: every candidate edge); see _Joined
     resolution: float = 0.05  # rad: largest joint step between two checked configurations
     margin: float = 0.03  # m: clearance of the moving pairs; half the largest Cartesian step
     seed: int = 0
@@ -256,33 +263,79 @@ def _check_edges(b: _Build, chunk: np.ndarray) -> tuple[np.ndarray, int]:
     return ok, sum(w.n_checks for w in by_kind) - before
 
 
-def _tree_edges(b: _Build, cand: np.ndarray, progress) -> tuple[np.ndarray, int]:
-    """Validity (c,) of the candidates that join two components (a spanning forest: the
-    ``tree`` option), tested in order, and the checks made."""
-    uf, by_kind = UnionFind(len(b.nodes)), _edge_worlds(b)
-    valid = np.zeros(len(cand), dtype=bool)
-    before = sum(w.n_checks for w in by_kind)
-    for k, (i, j) in enumerate(cand):
-        kind = edge_kind(b.source, i, j)
-        if uf.find(int(i)) != uf.find(int(j)) and \
-                b.planner.segment_free(by_kind[kind], b.nodes[i], b.nodes[j], b.chains[kind]):
-            uf.union(int(i), int(j))
-            valid[k] = True
-        if progress and k % 256 == 0:
-            progress("Super Graph edges", k, len(cand))
-    return valid, sum(w.n_checks for w in by_kind) - before
+class _Joined:
+    """The Super Graph's edges as they are accepted, answering whether a candidate edge
+    would still be useful: it joins two components (tree mode), or its ends are not already
+    joined by a path at most ``stretch`` times its length (Nieuwenhuisen & Overmars 2004,
+    "useful cycles"); with ``stretch`` 0 every edge is."""
+
+    def __init__(self, n: int, tree: bool, stretch: float):
+        self.components, self.tree, self.stretch = UnionFind(n), tree, stretch
+        self.adjacent: list[dict[int, float]] = [dict() for _ in range(n)]
+
+    def useful(self, a: int, b: int, length: float) -> bool:
+        if self.components.find(a) != self.components.find(b):
+            return True
+        if self.tree:
+            return False
+        return self.stretch <= 0 or not self._within(a, b, self.stretch * length)
+
+    def _within(self, a: int, b: int, bound: float) -> bool:
+        """Is b at most ``bound`` from a along the accepted edges (Dijkstra cut at bound)?"""
+        best, frontier = {a: 0.0}, [(0.0, a)]
+        while frontier:
+            d, u = heapq.heappop(frontier)
+            if u == b:
+                return True
+            if d > best[u]:
+                continue
+            for v, w in self.adjacent[u].items():
+                if d + w <= bound and d + w < best.get(v, np.inf):
+                    best[v] = d + w
+                    heapq.heappush(frontier, (d + w, v))
+        return False
+
+    def add(self, a: int, b: int, length: float) -> None:
+        self.components.union(a, b)
+        self.adjacent[a][b] = self.adjacent[b][a] = length
 
 
-def _all_edges(b: _Build, cand: np.ndarray, jobs: int, progress) -> tuple[np.ndarray, int]:
-    """Validity (c,) of every candidate, in chunks over ``jobs`` workers, and the checks made."""
-    valid, checks, done = np.zeros(len(cand), dtype=bool), 0, 0
-    chunks = [cand[i:i + EDGE_CHUNK] for i in range(0, len(cand), EDGE_CHUNK)]
-    for k, (ok, n) in enumerate(ordered_map(_check_edges, chunks, jobs, b)):
-        valid[k * EDGE_CHUNK:k * EDGE_CHUNK + len(ok)] = ok
-        checks += n
-        done += len(ok)
-        if progress:
-            progress("Super Graph edges", done, len(cand))
+def _edges(b: _Build, cand: np.ndarray, jobs: int, progress) -> tuple[np.ndarray, int]:
+    """Validity (c,) of the candidate edges (c, 2), and the checks made.
+
+    Candidates are taken shortest first; one is checked only when it is still useful
+    (:class:`_Joined`) given the edges accepted so far, and a valid one is kept only if it
+    still is when its check returns.  Checks run in chunks of :data:`EDGE_CHUNK` over
+    ``jobs`` workers, :data:`EDGE_WINDOW` chunks in flight: a chunk is made from the
+    results of all the chunks before the window, so the roadmap does not depend on the
+    number of jobs.  Long candidates, the costliest to check, are mostly the ones skipped."""
+    lengths = np.asarray(distance(b.nodes[cand[:, 0]], b.nodes[cand[:, 1]], b.weights), dtype=float).reshape(-1)
+    order = np.argsort(lengths, kind="stable")
+    joined = _Joined(len(b.nodes), b.options.tree, b.options.stretch)
+    valid, checks, position, pending = np.zeros(len(cand), dtype=bool), 0, 0, deque()
+    with Workers(_check_edges, jobs, b) as workers:
+        while True:
+            while len(pending) < EDGE_WINDOW and position < len(order):
+                chunk = []
+                while len(chunk) < EDGE_CHUNK and position < len(order):
+                    k = int(order[position])
+                    position += 1
+                    if joined.useful(int(cand[k, 0]), int(cand[k, 1]), lengths[k]):
+                        chunk.append(k)
+                if chunk:
+                    pending.append((chunk, workers.submit(cand[chunk])))
+            if not pending:
+                break
+            chunk, result = pending.popleft()
+            ok, n = result()
+            checks += n
+            for k in np.asarray(chunk)[ok]:
+                a, c = int(cand[k, 0]), int(cand[k, 1])
+                if joined.useful(a, c, lengths[k]):
+                    joined.add(a, c, lengths[k])
+                    valid[k] = True
+            if progress:
+                progress("Super Graph edges", position - sum(len(c) for c, _ in pending), len(cand))
     return valid, checks
 
 
@@ -328,7 +381,7 @@ def build_roadmap(scene: Path, cache_dir: Path, options: RoadmapOptions, jobs: i
     t2 = time.perf_counter()
     cand = candidate_edges(source, right.neighbours(), left.neighbours())
     b = replace(b, nodes=nodes, source=source)
-    valid, n = _tree_edges(b, cand, progress) if options.tree else _all_edges(b, cand, jobs, progress)
+    valid, n = _edges(b, cand, jobs, progress)
     checks += n
     if progress:
         progress("Super Graph edges", len(cand), len(cand))

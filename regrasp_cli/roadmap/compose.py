@@ -19,9 +19,9 @@ torso from the same roadmap, plus the torso swaps (see :func:`candidate_edges`).
 both take their torso from the right roadmap, the right part moves exactly along an R_r
 edge, so only the pairs involving L (but not L with L) are checked along the segment; from
 the left, symmetrically; a swap moves the torso in a way no elementary edge covered, and
-every pair is checked except L with L and R with R.  In tree mode an
-edge is only tested between nodes of different connected components (union-find), which
-yields a forest.
+every pair is checked except L with L and R with R.  Which candidates are checked, and
+in which order, is the builder's (:mod:`regrasp_cli.roadmap.build`): only useful
+ones, a forest in tree mode.
 
 Composition is a pure function of the two roadmaps: they are not modified.
 """

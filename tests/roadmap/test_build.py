@@ -34,6 +34,7 @@ SCENE_YAML = ROOT / "configs" / "scenes" / "desk_handover.yaml"
 
 OPTS = RoadmapOptions(nodes=10)  # shared with tests/roadmap/test_compose.py through the run's cache
 TREE = replace(OPTS, tree=True)
+FULL = replace(OPTS, stretch=0.0)  # every candidate edge checked
 SMALL = RoadmapOptions(nodes=8)  # the determinism builds
 
 
@@ -59,6 +60,11 @@ def graph_path(graph, problem, cache_dir) -> Path:
 @pytest.fixture(scope="module")
 def tree(problem, cache_dir) -> RoadmapArtefact:
     return load_or_build(SCENE_YAML, cache_dir, TREE, jobs=1)
+
+
+@pytest.fixture(scope="module")
+def full(problem, cache_dir) -> RoadmapArtefact:
+    return load_or_build(SCENE_YAML, cache_dir, FULL, jobs=2)
 
 
 @pytest.fixture(scope="module")
@@ -197,6 +203,22 @@ def test_tree_mode_spans_the_components_of_graph_mode(tree, graph):
     assert t_edges <= g_edges
     comps = lambda g: sorted(sorted(c) for c in nx.connected_components(g))  # noqa: E731
     assert comps(tree.networkx()) == comps(graph.networkx())
+
+
+def test_graph_mode_skips_only_edges_it_can_do_without(graph, full):
+    """Useful cycles: the graph keeps a subset of the edges of the graph with every valid
+    candidate, with the same components, and joins the ends of every edge it left out
+    by a path at most ``stretch`` times that edge's length."""
+    assert np.array_equal(graph.graph.nodes, full.graph.nodes)
+    g_edges = {tuple(e) for e in graph.graph.edges.tolist()}
+    f_edges = {tuple(e) for e in full.graph.edges.tolist()}
+    assert g_edges < f_edges
+    comps = lambda g: sorted(sorted(c) for c in nx.connected_components(g))  # noqa: E731
+    g = graph.networkx()
+    assert comps(g) == comps(full.networkx())
+    for (a, b), length in zip(full.graph.edges.tolist(), full.graph.lengths):
+        if (a, b) not in g_edges:
+            assert nx.dijkstra_path_length(g, a, b, weight="length") <= OPTS.stretch * length + 1e-9
 
 
 # --------------------------------------------------------------------------- determinism
