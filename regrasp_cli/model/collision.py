@@ -33,6 +33,7 @@ from __future__ import annotations
 import warnings
 from collections import deque
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Callable, Iterable, Sequence
 
 import coal
@@ -358,7 +359,14 @@ def segment_samples(q0: np.ndarray, q1: np.ndarray, resolution: float, min_steps
     """Interpolation parameters in [0, 1] (ends included) spaced so that no joint moves more
     than ``resolution`` between neighbours, ordered coarse to fine (ends, then midpoints
     breadth-first)."""
-    n = max(1, min_steps, int(np.ceil(np.max(np.abs(q1 - q0)) / resolution)))
+    return bisection_order(max(1, min_steps, int(np.ceil(np.max(np.abs(q1 - q0)) / resolution))))
+
+
+@lru_cache(maxsize=4096)
+def bisection_order(n: int) -> np.ndarray:
+    """The parameters k / n, k = 0 .. n, ends first, then midpoints breadth-first (n + 1,),
+    read-only: it depends on n alone, and Vis-PRM asks for the first samples of thousands
+    of segments."""
     order, queue = [0, n], deque([(0, n)])
     while queue:
         a, b = queue.popleft()
@@ -366,4 +374,6 @@ def segment_samples(q0: np.ndarray, q1: np.ndarray, resolution: float, min_steps
             m = (a + b) // 2
             order.append(m)
             queue.extend(((a, m), (m, b)))
-    return np.asarray(order, dtype=float) / n
+    out = np.asarray(order, dtype=float) / n
+    out.flags.writeable = False
+    return out

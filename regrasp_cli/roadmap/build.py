@@ -55,7 +55,7 @@ class RoadmapOptions:
     nodes: int = 50  # nodes of each elementary roadmap
     max_failures: int = 2000  # Vis-PRM: consecutive dropped samples that end a roadmap early
     tree: bool = False  # Super Graph edges only between different components
-    stretch: float = 1.5  # an edge is checked only when the graph does not already join its ends within
+    stretch: float = 2.0  # an edge is checked only when the graph does not already join its ends within
     # stretch times its length (0: every candidate edge); see _Joined
     resolution: float = 0.05  # rad: largest joint step between two checked configurations
     margin: float = 0.03  # m: clearance of the moving pairs; half the largest Cartesian step

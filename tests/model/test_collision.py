@@ -348,6 +348,15 @@ def test_segment_samples_coarse_to_fine():
     assert list(t[:5]) == [0.0, 1.0, 0.5, 0.25, 0.75]
 
 
+def test_segment_samples_are_shared_and_cannot_be_changed():
+    # the order depends on the number of steps only: segments of 8 steps share it
+    a = segment_samples(np.zeros(2), np.array([0.8, 0.1]), 0.1)
+    b = segment_samples(np.ones(2), np.array([1.0, 0.8]), 0.025)
+    assert a is b and sorted(a) == list(np.arange(9) / 8)
+    with pytest.raises(ValueError):
+        a[0] = 0.5
+
+
 def test_segment_samples_of_a_point():
     t = segment_samples(np.ones(3), np.ones(3), 0.02)
     assert list(t) == [0.0, 1.0]
