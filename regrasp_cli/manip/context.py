@@ -73,6 +73,7 @@ class OnlineOptions:
     coarse_checks: int = 4  # certified checks step this many times farther where the clearance allows
     # (motion.local.tiered_free): same certificate, fewer checks
     shortcut_iterations: int = 36
+    probe_step: int = 16  # fine intervals between the samples of the shortcuts' cheap probe (queries.smooth)
     partial_shortcuts: int = 30  # checks of one joint group's straight line at a time (motion.rrt.partial_shortcut)
     final_shortcuts: int = 24  # random shortcuts after the partial ones
     blend: bool = True  # cut the corners where the curve is free, and time without stopping there (motion.blend)
@@ -157,6 +158,10 @@ class Scratch:
     def segment_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray, limit: int | None = None) -> bool:
         """Certified check; with ``limit``, only the coarsest samples (False proves a collision)."""
         return self._local(world).segment_free(world, q0, q1, self.chains, limit)
+
+    def probe_free(self, world: "Placed", q0: np.ndarray, q1: np.ndarray) -> bool:
+        """The cheap test of :meth:`LocalPlanner.probe_free`: False proves a collision."""
+        return self._local(world).probe_free(world, q0, q1, self.options.probe_step, self.chains)
 
     def blend_free(self, world: "Placed", A: np.ndarray, C: np.ndarray, B: np.ndarray) -> bool:
         """The blend curve A, C, B of :mod:`motion.blend`, checked like a segment."""

@@ -166,14 +166,27 @@ def smooth(scratch: Scratch, rng: np.random.Generator, path: np.ndarray, world: 
     one arm while the other needs its waypoints), random shortcuts again (the partial ones
     open new straight lines), then (``options.prune``) the waypoints their neighbours see
     past dropped: fewer, straighter corners to blend and time (default suite: median
-    motion 16.9 s instead of 34.5 s; docs/BENCHMARKS.md)."""
+    motion 16.9 s instead of 34.5 s; docs/BENCHMARKS.md).
+
+    Most candidate segments are superseded by later shortcuts, so the shortcuts are first
+    decided with the cheap probe (:meth:`Scratch.probe_free`) and only the result is
+    certified; when one of its segments is not, the smoothing is done again with certified
+    checks and the same random draws (the probe never made the path worse, only the work)."""
+    seed = int(rng.integers(2**63))
     free = lambda x, y: scratch.segment_free(world, x, y)  # noqa: E731
+    probed = _smooth(scratch, np.random.default_rng(seed), path, lambda x, y: scratch.probe_free(world, x, y), weights)
+    if all(free(a, b) for a, b in zip(probed[:-1], probed[1:])):
+        return probed
+    return _smooth(scratch, np.random.default_rng(seed), path, free, weights)
+
+
+def _smooth(scratch: Scratch, rng: np.random.Generator, path: np.ndarray, free, weights: np.ndarray) -> np.ndarray:
+    """:func:`smooth`'s passes with the segment check ``free(q0, q1)``."""
     o = scratch.options
     metric = lambda x, y: distance(x, y, weights)  # noqa: E731
     path = shortcut(path, free, metric, rng, o.shortcut_iterations)
     groups = tuple(scratch.problem.robot.groups.values())
-    coarse = lambda x, y: scratch.segment_free(world, x, y, limit=3)  # noqa: E731
-    path = partial_shortcut(path, free, groups, o.partial_shortcuts, coarse)
+    path = partial_shortcut(path, free, groups, o.partial_shortcuts)
     path = shortcut(path, free, metric, rng, o.final_shortcuts)
     return prune(path, free) if o.prune else path
 

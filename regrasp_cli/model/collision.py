@@ -258,8 +258,9 @@ def collision_model(robot: Robot, obstacles: Sequence[ObstacleSpec] = (),
     model = CollisionModel(robot, obstacles, obj, options, gm, np.zeros(len(gm.collisionPairs)), n_robot,
                            tuple(obstacle_geoms), object_geom, alias, X_JP)
     if margin is not None:
+        names = [model.geometry_name(g) for g in range(gm.ngeoms)]
         for k, cp in enumerate(gm.collisionPairs):
-            model.margins[k] = margin(model.geometry_name(cp.first), model.geometry_name(cp.second))
+            model.margins[k] = margin(names[cp.first], names[cp.second])
     model.margins.flags.writeable = False
     return model
 

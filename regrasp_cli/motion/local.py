@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from regrasp_cli.model.collision import segment_samples
+from regrasp_cli.model.collision import bisection_order, segment_samples
 from regrasp_cli.model.robot import Robot
 from regrasp_cli.motion.blend import bezier_points, bezier_steps
 
@@ -137,6 +137,14 @@ class LocalPlanner:
         if limit is None and self.coarse > 1 and world.certified:
             return tiered_free(world, lambda u: q0 + u[:, None] * (q1 - q0), n, self.coarse)
         return world.segment_free(q0, q1, self.resolution, n, limit)
+
+    def probe_free(self, world, q0: np.ndarray, q1: np.ndarray, every: int,
+                   chains: tuple[np.ndarray, ...] | None = None) -> bool:
+        """A cheap test of the segment: a sample every ``every`` fine intervals, coarse to
+        fine, each checked at the plain clearance.  False proves a collision or a lacking
+        clearance; True is no certificate."""
+        m = -(-self.steps(q0, q1, chains) // max(every, 1))
+        return all(world.is_free(q0 + t * (q1 - q0)) for t in bisection_order(m))
 
     def blend_free(self, world, A: np.ndarray, C: np.ndarray, B: np.ndarray,
                    chains: tuple[np.ndarray, ...] | None = None) -> bool:

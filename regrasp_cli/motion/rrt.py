@@ -110,16 +110,14 @@ def prune(path: np.ndarray, segment_free: Callable[[np.ndarray, np.ndarray], boo
 
 
 def partial_shortcut(path: np.ndarray, segment_free: Callable[[np.ndarray, np.ndarray], bool],
-                     groups: tuple[np.ndarray, ...], attempts: int = 30,
-                     coarse: Callable[[np.ndarray, np.ndarray], bool] | None = None) -> np.ndarray:
+                     groups: tuple[np.ndarray, ...], attempts: int = 30) -> np.ndarray:
     """Partial shortcuts (after Geraerts & Overmars 2007): for one joint group (an index
     array of ``groups``) and a span of waypoints i0 < i1, move only that group's joints
     along the straight line joining its values at the span's ends, at the pace of the
     original path (its cumulative joint-space length), while the other joints keep their
     motion.  Kept when every new segment is free and the group travels less (L1 over its
     joints).  Spans are tried longest first, per group: the whole path, then its halves,
-    recursively, ``attempts`` checks in all; ``coarse(a, b)``, when given, is a cheap
-    check whose False proves a collision, run over the whole span before the full checks.
+    recursively, ``attempts`` checks in all.
 
     A full shortcut must move every joint at once, so one arm's detour survives whenever
     the other arm needs its waypoints; roadmap paths (Super Graph nodes sample every joint)
@@ -142,7 +140,7 @@ def partial_shortcut(path: np.ndarray, segment_free: Callable[[np.ndarray, np.nd
             new[1:-1, g] = part[0, g] + f[1:-1, None] * (part[-1, g] - part[0, g])  # the ends exactly
             attempts -= 1
             pairs = list(zip(new[:-1], new[1:]))
-            if (coarse is None or all(coarse(a, b) for a, b in pairs)) and all(segment_free(a, b) for a, b in pairs):
+            if all(segment_free(a, b) for a, b in pairs):
                 path[i0:i1 + 1] = new
             else:
                 m = (i0 + i1) // 2
