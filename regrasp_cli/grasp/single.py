@@ -160,7 +160,8 @@ class HandModel:
         self.gm, self.gd = gm, gm.createData()
         cold_start(self.gd)
         for k, (a, b) in enumerate((p.first, p.second) for p in gm.collisionPairs):
-            if b == self.obj and self.erosion[a] == 0.0:  # not a fingertip: keep ``clearance`` from the object
+            if b == self.obj and a < n and not self.is_tip[a]:  # not a fingertip: keep ``clearance`` from the object
+                # (a fingertip touches it, eroded or, a mesh, not)
                 self.gd.collisionRequests[k].security_margin = clearance
         for k, (fa, fb) in enumerate(self.pair_fingers):
             for f_ in {fa, fb} - {None}:
