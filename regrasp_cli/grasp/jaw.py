@@ -304,7 +304,7 @@ def contact_patch(surface: Surface, w: np.ndarray, closing: np.ndarray, pads: li
         inside &= surface.normals[near] @ closing < -0.5  # outward normals against the pad's motion
     near = near[inside]
     if near.size == 0:
-        i = surface.tree.query(w)[1]
+        i = surface.under(w)
         return surface.points[i], surface.normals[i]
     n = surface.normals[near].sum(axis=0)
     return surface.points[near].mean(axis=0), n / max(float(np.linalg.norm(n)), 1e-12)

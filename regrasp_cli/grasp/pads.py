@@ -290,7 +290,7 @@ def pad_grasp(hm: HandModel, pads: PadHand, surface: Surface, X_OG: np.ndarray, 
     for f in np.flatnonzero(touching):
         k = _finger_gap(hm, f)[1]
         w = X_OW[:3, :3] @ pin.computeDistance(hm.gm, hm.gd, k).getNearestPoint2() + X_OW[:3, 3]
-        near = surface.tree.query(w)[1]
+        near = surface.under(w)
         # the patch under the touching link alone (two links of a finger may touch apart)
         a = hm.gm.collisionPairs[k].first
         pad = [(X_OW @ hm.gd.oMg[a].homogeneous, hm.gm.geometryObjects[a].geometry, hm.erosion[a])]

@@ -145,6 +145,13 @@ class Surface:
                        cKDTree(np.vstack([self.points, points])), self.mass_centre, self.step, self.watertight,
                        self.face_flip)
 
+    def under(self, w: np.ndarray, k: int = 8) -> int:
+        """The sample (index) whose tangent plane passes nearest to w (3,), a point of the
+        surface, among its ``k`` nearest: near an edge the nearest sample may lie on the
+        other face, whose normal is off w's face by the edge's angle."""
+        idx = np.atleast_1d(self.tree.query(w, k=min(k, len(self)))[1])
+        return int(idx[np.argmin(np.abs(np.einsum("ij,ij->i", w - self.points[idx], self.normals[idx])))])
+
     def within(self, centre, radius: float) -> np.ndarray:
         """Sorted indices of the samples within ``radius`` (m) of ``centre`` ((3,), m)."""
         idx = self.tree.query_ball_point(np.asarray(centre, dtype=float), float(radius))

@@ -284,3 +284,18 @@ def test_distance_grid_of_a_cup_is_positive_in_its_cavity():
     clear = np.abs(exact) > 0.005
     assert np.all(np.sign(grid(p)[clear]) == np.sign(exact[clear]))
     assert np.quantile(np.abs(grid(p) - exact), 0.99) < 0.004
+
+
+def test_the_sample_under_a_point_near_an_edge_lies_on_its_face(box):
+    """A point of the top face 0.3 mm from an edge: its nearest sample may be on the side
+    face (normal 90 degrees off, which the validator refuses); the sample under it is on
+    the top face."""
+    s = _build(box, 0.004)
+    top = box.bounds[1, 2]
+    edge = box.bounds[1, 0]
+    side = s.points[(np.abs(s.points[:, 0] - edge) < 1e-9) & (s.points[:, 2] < top - 1e-4)]
+    q = side[np.argmax(side[:, 2])]  # the side face's sample nearest the top edge
+    w = np.array([edge - 3e-4, q[1], top])  # on the top face, just inside the edge
+    nearest = int(s.tree.query(w)[1])
+    assert np.allclose(s.normals[nearest], [1, 0, 0])  # the trap: the nearest sample is on the side
+    assert np.allclose(s.normals[s.under(w)], [0, 0, 1])
