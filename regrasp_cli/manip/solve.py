@@ -177,10 +177,12 @@ def join(pieces: list[np.ndarray], labels: list[str | None] | None = None,
 def _corner_checks(seg: list[str | None], curve_free):
     """blend_free(i, A, C, B) of :func:`motion.blend.choose_radii` for a phase whose
     segments lie on the pieces ``seg``: ``curve_free(label, A, C, B)`` with the query's
-    label when both segments at corner i lie on its path, else None."""
+    label when a segment at corner i lies on its path (the corner where an approach,
+    lift or retreat line meets it too: that blend is certified in the query's world, as
+    a sampled check let a fingertip through the object next to the line, YCB mug and
+    bowl), else None (a corner between two lines)."""
     def free(i, A, C, B):
-        label = seg[i - 1] if seg[i - 1] == seg[i] else None
-        return curve_free(label, A, C, B)
+        return curve_free(seg[i - 1] or seg[i], A, C, B)
     return free
 
 
