@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -195,6 +195,12 @@ def dumps(plan: Plan) -> str:
 def write_plan(path: str | Path, plan: Plan) -> None:
     """Write atomically (temporary file renamed into place)."""
     atomic_write_text(path, dumps(plan))
+
+
+def write_refused(path: str | Path, plan: Plan, failure: dict) -> None:
+    """Write ``plan`` again with status ``failed`` and ``failure`` ({"stage", "reason", ...}):
+    a plan that its validation refused never says ``solved``."""
+    write_plan(path, replace(plan, status="failed", failure=failure))
 
 
 # ------------------------------------------------------------------ reading

@@ -367,3 +367,22 @@ def test_a_moved_obstacle_reuses_the_roadmap_and_the_plan_is_valid(default_plan,
     assert "\nvalid" in result.stdout or result.stdout.startswith("valid")
     used = json.loads(out.read_text())["stats"]["artefacts"]["roadmap"]
     assert used == json.loads(default_plan.read_text())["stats"]["artefacts"]["roadmap"]
+
+
+def test_a_plan_its_validation_refuses_is_written_failed(solved, cache_dir, plan_dir, monkeypatch):
+    """The plan is written, then validated: when the validator refuses it, the file is
+    written again with status failed at stage validation (it said solved, exit 1)."""
+    from regrasp_cli.commands import validate as command
+    from regrasp_cli.manip.status import PlanningFailed, Stage
+
+    def refuse(out_file, console):
+        raise PlanningFailed(Stage.VALIDATION, "the written plan fails 1 check(s); first: a test's refusal")
+
+    monkeypatch.setattr(command, "check_written", refuse)
+    out = plan_dir / "refused.json"
+    result = plan(cache_dir, out)
+    assert result.exit_code == 1, (result.output, result.exception)
+    d = json.loads(out.read_text())
+    assert d["status"] == "failed" and len(d["phases"]) == len(PHASES)
+    assert d["failure"] == {"stage": "validation", "transition": None,
+                            "reason": "the written plan fails 1 check(s); first: a test's refusal"}

@@ -45,7 +45,7 @@ from typing import Callable
 
 import numpy as np
 
-from regrasp_cli.manip.status import Stage
+from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.bench.suite import DEFAULT_ITERATIONS, REFERENCE, Suite
 
 
@@ -224,7 +224,7 @@ def execute(item: RunItem) -> dict:
     from regrasp_cli.manip.record import make_plan
     from regrasp_cli.artefacts import placements_for_style
     from regrasp_cli.manip.tasks import manipulation
-    from regrasp_cli.trajectory import write_plan
+    from regrasp_cli.trajectory import write_plan, write_refused
     from regrasp_cli.validate import validate_plan
 
     problem, lists, roadmap, hashes, weights = _item_context(item)
@@ -248,6 +248,10 @@ def execute(item: RunItem) -> dict:
     write_plan(out_file, plan)
     t2 = time.perf_counter()
     report = validate_plan(out_file, jobs=1) if outcome.failure is None else None
+    refused = None if report is None or report.valid else PlanningFailed(
+        Stage.VALIDATION, f"the written plan fails {len(report.issues)} check(s); first: {report.issues[0]}")
+    if refused is not None:
+        write_refused(out_file, plan, refused.as_dict())
     t3 = time.perf_counter()
     rec.update({
         "total_s": t3 - t0, "planner_s": t1 - t0, "write_s": t2 - t1, "validation_s": t3 - t2,
@@ -271,11 +275,10 @@ def execute(item: RunItem) -> dict:
         t4 = time.perf_counter()
         fewer, solved = manipulation.fewer_regrasps(graph["graph"], stable, rec["regrasps"], item.exhaustive)
         rec["exhaustive"] = {"fewer_exist": fewer, "edges_solved": solved, "s": time.perf_counter() - t4}
-    if report.valid:
+    if refused is None:
         rec["solved"] = True
     else:
-        rec["stage"] = Stage.VALIDATION.value
-        rec["reason"] = f"the written plan fails {len(report.issues)} check(s); first: {report.issues[0]}"
+        rec["stage"], rec["reason"] = refused.stage.value, refused.reason
     return rec
 
 

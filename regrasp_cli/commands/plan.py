@@ -28,7 +28,7 @@ from regrasp_cli.manip.tasks import handover, manipulation
 from regrasp_cli.roadmap.build import RoadmapOptions
 from regrasp_cli.commands.progress import load_problem_shown
 from regrasp_cli.store import check_writable
-from regrasp_cli.trajectory import Plan, write_plan
+from regrasp_cli.trajectory import Plan, write_plan, write_refused
 
 
 def print_summary(plan: Plan, outcome: Outcome, console: Console) -> None:
@@ -104,6 +104,11 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
         raise outcome.failure
     print_summary(plan, outcome, console)
     if check:
-        check_written(out_file, console)
+        try:
+            check_written(out_file, console)
+        except PlanningFailed as exc:
+            write_refused(out_file, plan, exc.as_dict())
+            console.print(f"plan (status failed): {out_file}")
+            raise
     console.print(f"plan: {out_file}")
     return 0
