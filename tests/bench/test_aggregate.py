@@ -113,3 +113,15 @@ def test_markdown_has_every_table():
     assert "### desk, roadmap" in text and "| query | planning n | planning T (s) |" in text
     assert "## Failures (5)" in text  # 2 roadmap + 3 rrt-connect
     assert summary_rows(RECORDS)[1][10] == "transition (place) 3"
+
+
+def test_the_paper_row_of_grasp_configurations_sums_the_hand_over_key_stages():
+    """Stages named by style ("handover: nodes"), as the planner names them now: the
+    hand-over's nodes, double grasps and exchange pose, not another style's nodes."""
+    from regrasp_cli.bench.report import paper_rows
+
+    stages = {"styles: necessary conditions": 0.1, "one-arm: nodes": 5.0, "handover: nodes": 0.5,
+              "handover: double grasps": 0.01, "handover: exchange": 0.2, "handover: queries": 0.6}
+    records = [dict(rec("roadmap", s, True, 2.0), stages_s=stages) for s in range(3)]
+    rows = {name: ours for name, _, ours in paper_rows(records, {}, "desk")}
+    assert rows["single + double grasp configurations (and exchange pose)"] == "0.71 s"
