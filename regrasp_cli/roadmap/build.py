@@ -317,7 +317,7 @@ def _edges(b: _Build, cand: np.ndarray, jobs: int, progress) -> tuple[np.ndarray
         while True:
             while len(pending) < EDGE_WINDOW and position < len(order):
                 chunk = []
-                while len(chunk) < EDGE_CHUNK and position < len(order):
+                while len(chunk) < EDGE_CHUNK and position < len(order):  # the next useful candidates
                     k = int(order[position])
                     position += 1
                     if joined.useful(int(cand[k, 0]), int(cand[k, 1]), lengths[k]):
