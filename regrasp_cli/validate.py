@@ -108,6 +108,13 @@ class ValidationReport:
     def valid(self) -> bool:
         return not self.issues
 
+    def refusal(self) -> str | None:
+        """Why a plan with issues is refused, in one line (None when valid): the reason
+        `regrasp plan` and a benchmark run give at stage ``validation``."""
+        if self.valid:
+            return None
+        return f"the written plan fails {len(self.issues)} check(s); first: {self.issues[0]}"
+
 
 # ------------------------------------------------------------------ motion checks
 

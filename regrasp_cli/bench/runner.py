@@ -248,8 +248,7 @@ def execute(item: RunItem) -> dict:
     write_plan(out_file, plan)
     t2 = time.perf_counter()
     report = validate_plan(out_file, jobs=1) if outcome.failure is None else None
-    refused = None if report is None or report.valid else PlanningFailed(
-        Stage.VALIDATION, f"the written plan fails {len(report.issues)} check(s); first: {report.issues[0]}")
+    refused = None if report is None or report.valid else PlanningFailed(Stage.VALIDATION, report.refusal())
     if refused is not None:
         write_refused(out_file, plan, refused.as_dict())
     t3 = time.perf_counter()

@@ -41,5 +41,4 @@ def check_written(out_file, console: Console) -> None:
     report = validate_plan(out_file)
     print_validation(report, console)
     if not report.valid:
-        raise PlanningFailed(Stage.VALIDATION, f"the written plan fails {len(report.issues)} check(s); first: "
-                             f"{report.issues[0]}")
+        raise PlanningFailed(Stage.VALIDATION, report.refusal())

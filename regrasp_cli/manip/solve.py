@@ -178,9 +178,9 @@ def _corner_checks(seg: list[str | None], curve_free):
     """blend_free(i, A, C, B) of :func:`motion.blend.choose_radii` for a phase whose
     segments lie on the pieces ``seg``: ``curve_free(label, A, C, B)`` with the query's
     label when a segment at corner i lies on its path (the corner where an approach,
-    lift or retreat line meets it too: that blend is certified in the query's world, as
-    a sampled check let a fingertip through the object next to the line, YCB mug and
-    bowl), else None (a corner between two lines)."""
+    lift or retreat line meets it too: its blend cuts towards the path, away from the
+    contact, and is certified in the query's world like the path), else None (a corner
+    between two lines, sampled as they were)."""
     def free(i, A, C, B):
         return curve_free(seg[i - 1] or seg[i], A, C, B)
     return free

@@ -419,8 +419,8 @@ def _keys_and_paths(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarr
 def blend_check(scratch: Scratch, queries: list[Query]):
     """curve_free(step, label, A, C, B) of :func:`solve.time_steps`: a corner on or at the
     end of a query's path in its certified world; a corner between two pieces of an
-    approach, lift or retreat line in the step's world without clearance, sampled as
-    `regrasp validate` samples it; a step without a query has no corner to cut."""
+    approach, lift or retreat line in the step's world without clearance, as those lines
+    were checked; a step without a query has no corner to cut."""
     worlds = {q.label: q.worlds.full for q in queries}
 
     def free(step: Step, label: str | None, A: np.ndarray, C: np.ndarray, B: np.ndarray) -> bool:
