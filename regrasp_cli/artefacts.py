@@ -186,6 +186,12 @@ def _changes(reuse) -> str:
     return "; ".join(x for x in (moved, gone) if x)
 
 
+def rebuild_notice(path: Path, exc: StaleArtefactError) -> str:
+    """The line said when a stale or damaged artefact is built again: what was wrong,
+    without the advice to rebuild it (that is being done)."""
+    return f"rebuilding {path}: {exc.message.split('; rebuild it with')[0]}"
+
+
 def _cached(path: Path, prov, build: bool, make, read, builder: Builder):
     """``read(path, prov)`` and the file's SHA-256, after ``make()`` when the artefact is
     missing, stale or damaged (and ``build``; else ``read`` refuses it), all under the
@@ -198,7 +204,7 @@ def _cached(path: Path, prov, build: bool, make, read, builder: Builder):
                 try:  # read once: the freshness check is the read itself
                     return read(path, prov), sha256_file(path)
                 except StaleArtefactError as exc:
-                    builder.notice(f"rebuilding {path}: {exc.message.split('; rebuild it with')[0]}")
+                    builder.notice(rebuild_notice(path, exc))
                     make()
         return read(path, prov), sha256_file(path)
 

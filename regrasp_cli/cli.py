@@ -14,7 +14,7 @@ from pathlib import Path
 import click
 
 from regrasp_cli import __version__
-from regrasp_cli.errors import RegraspError
+from regrasp_cli.errors import RegraspError, one_line
 
 
 class RegraspGroup(click.Group):
@@ -26,7 +26,7 @@ class RegraspGroup(click.Group):
         except RegraspError as exc:
             if ctx.obj and ctx.obj.get("debug"):
                 raise
-            click.echo(f"error: {exc}", err=True)
+            click.echo(f"error: {one_line(str(exc))}", err=True)
             sys.exit(exc.exit_code)
 
 
@@ -52,7 +52,7 @@ def _roadmap_nodes() -> int:
 
 
 def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
-    click.echo(f"warning: {message}", err=True)
+    click.echo(f"warning: {one_line(str(message))}", err=True)
 
 
 def _check_seed(ctx: click.Context, param: click.Parameter, value: int | None) -> int | None:
@@ -167,7 +167,7 @@ def grasps_show(ctx: click.Context, file: Path, best: int, scene: Path | None, p
     from regrasp_cli.commands.report import show_grasps
     from regrasp_cli.commands.show import check_grasps_png
 
-    check_grasps_png(png, scene, best)
+    check_grasps_png(png, scene, best, file)
     show_grasps(file, best, scene, ctx.obj["cache_dir"])
     if png is not None:
         from regrasp_cli.commands.show import run_grasps_png

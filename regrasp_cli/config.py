@@ -19,7 +19,8 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
-from regrasp_cli.errors import InputError
+from regrasp_cli.errors import InputError, shown
+from regrasp_cli.inputs import check_expansion, read_text, regular_file
 from regrasp_cli.examples import BUILTIN_PREFIX, builtin_robot
 from regrasp_cli.spatial import pose_matrix
 
@@ -39,19 +40,21 @@ SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 def read_yaml(path: str | Path) -> tuple[Path, dict]:
-    """Read a YAML mapping; errors name the file (and the line for syntax errors)."""
+    """Read a YAML mapping; errors name the file (and the line for syntax errors).  Only
+    a regular file of bounded size is read, and a document whose aliases expand to too
+    many values is refused (:mod:`regrasp_cli.inputs`)."""
     path = Path(path)
-    if not path.is_file():
-        raise InputError(path, None, "no such file")
+    text = read_text(path, "YAML file")
     try:
-        data = yaml.load(path.read_text(), Loader=SAFE_LOADER)
+        data = yaml.load(text, Loader=SAFE_LOADER)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise InputError(path, None, f"YAML syntax error{where}: {problem}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, None, f"cannot read the file ({exc})") from None
+    except RecursionError:
+        raise InputError(path, None, "nested too deeply; expected a configuration file") from None
+    check_expansion(data, path)
     if not isinstance(data, dict):
         raise InputError(path, None, f"expected a YAML mapping at the top level, found {_kind(data)}")
     return path.resolve(), data
@@ -141,9 +144,9 @@ class Fields:
             return default
         v = self.raw(key)
         if isinstance(v, str) and _number_text(v):
-            raise self.error(key, f"expected a number, found the text {v!r} ({_number_hint(v)})")
+            raise self.error(key, f"expected a number, found the text {shown(v)} ({_number_hint(v)})")
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise self.error(key, f"expected a finite number, found {v!r}")
+            raise self.error(key, f"expected a finite number, found {shown(v)}")
         if positive and v <= 0:
             raise self.error(key, f"expected a number > 0, found {v}")
         if maximum is not None and v > maximum:
@@ -168,9 +171,9 @@ def as_vector(file, where: str, v: Any, n: int | None = None, positive: bool = F
     )
     if not ok or (n is not None and len(v) != n):
         shape = f"a list of {n} numbers" if n else "a list of numbers"
-        raise InputError(file, where, f"expected {shape}, found {v!r}")
+        raise InputError(file, where, f"expected {shape}, found {shown(v)}")
     if positive and any(x <= 0 for x in v):
-        raise InputError(file, where, f"expected numbers > 0, found {v!r}")
+        raise InputError(file, where, f"expected numbers > 0, found {shown(v)}")
     return tuple(float(x) for x in v)
 
 
@@ -183,10 +186,10 @@ def parse_pose(fields: Fields, key: str) -> np.ndarray:
         raise f.error("quat", "give either rpy or quat, not both")
     if f.has("quat"):
         quat = np.array(f.vector("quat", 4))
-        norm = np.linalg.norm(quat)
-        if norm < 1e-9:
+        m = float(np.abs(quat).max())  # scaled first: the norm of [1e308, 1e308, 0, 0] overflows
+        if m == 0.0 or m * float(np.linalg.norm(quat / m)) < 1e-9:
             raise f.error("quat", "quaternion of zero norm; expected [x, y, z, w] with norm 1")
-        return pose_matrix(xyz, quat=quat / norm)
+        return pose_matrix(xyz, quat=quat / m / np.linalg.norm(quat / m))
     rpy = f.vector("rpy", 3) if f.has("rpy") else (0.0, 0.0, 0.0)
     return pose_matrix(xyz, rpy=rpy)
 
@@ -199,6 +202,11 @@ def resolve_path(file: Path, where: str, value: str, must_exist: bool = True) ->
     p = p if p.is_absolute() else (file.parent / p)
     if must_exist and not p.exists():
         raise InputError(file, where, f"no such file: {p}")
+    if must_exist:
+        try:
+            regular_file(p)
+        except InputError as exc:  # a FIFO would block the reader, a device never end
+            raise InputError(file, where, f"{p} {exc.message}") from None
     return p.resolve() if p.exists() else p
 
 
@@ -318,7 +326,7 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     f.only("format", "urdf", "srdf", "groups", "hands", "rest", "disabled_collisions", "self_collision",
            "convex_hulls", "collision_from_visual")
     if f.str("format") != ROBOT_FORMAT:
-        raise f.error("format", f"expected '{ROBOT_FORMAT}', found {f.data['format']!r}")
+        raise f.error("format", f"expected '{ROBOT_FORMAT}', found {shown(f.data['format'])}")
     urdf, package_dirs = resolve_urdf(file, "urdf", f.str("urdf"))
 
     g = f.sub("groups")
@@ -349,7 +357,7 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
             raise f.error("disabled_collisions", "expected a list of [link_a, link_b] pairs")
         for i, pair in enumerate(raw):
             if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(s, str) for s in pair)):
-                raise f.error(f"disabled_collisions[{i}]", f"expected [link_a, link_b], found {pair!r}")
+                raise f.error(f"disabled_collisions[{i}]", f"expected [link_a, link_b], found {shown(pair)}")
             pairs.append((pair[0], pair[1]))
 
     sc = SelfCollisionOptions()
@@ -365,7 +373,7 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
         srdf_pairs = tuple(_srdf_disabled(srdf, file))
     hulls = f.data.get("convex_hulls", True)
     if not isinstance(hulls, bool):
-        raise f.error("convex_hulls", f"expected true or false, found {hulls!r}")
+        raise f.error("convex_hulls", f"expected true or false, found {shown(hulls)}")
     return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc, srdf, srdf_pairs, hulls,
                      f.names("collision_from_visual", ()))
 
@@ -399,16 +407,16 @@ def _hand(h: Fields, side: str) -> HandSpec:
                                   fi.float("tip_radius", positive=True), opened, closed))
     contact = h.str("contact", "point")
     if contact not in ("point", "soft"):
-        raise h.error("contact", f"expected 'point' or 'soft', found {contact!r}")
+        raise h.error("contact", f"expected 'point' or 'soft', found {shown(contact)}")
     kind = h.str("kind", "auto")
     if kind not in HAND_KINDS:
-        raise h.error("kind", f"expected one of {', '.join(HAND_KINDS)}, found {kind!r}")
+        raise h.error("kind", f"expected one of {', '.join(HAND_KINDS)}, found {shown(kind)}")
     names = [f.name for f in fingers]
     if len(set(names)) != len(names):
         raise h.error("fingers", f"finger names must differ, found {names}")
     opposing = h.str("opposing", None)
     if opposing is not None and opposing not in names:
-        raise h.error("opposing", f"expected the name of one of the fingers ({', '.join(names)}), found {opposing!r}")
+        raise h.error("opposing", f"expected the name of one of the fingers ({', '.join(names)}), found {shown(opposing)}")
     link, offset = _grasp_frame(h)
     return HandSpec(side, ARM_OF_HAND[side], link, tuple(fingers), contact, kind, offset, opposing)
 
@@ -485,7 +493,7 @@ def load_scene_spec(path: str | Path) -> SceneSpec:
     f = Fields(file, data)
     f.only("format", "robot", "object", "obstacles", "task", "planning", "supports")
     if f.str("format") != SCENE_FORMAT:
-        raise f.error("format", f"expected '{SCENE_FORMAT}', found {f.data['format']!r}")
+        raise f.error("format", f"expected '{SCENE_FORMAT}', found {shown(f.data['format'])}")
     robot = _robot_path(f)
     obj = _object(f, 0.5)
 
@@ -537,7 +545,7 @@ def _obstacles(f: Fields) -> tuple[ObstacleSpec, ...]:
     names = [ob.name for ob in obstacles]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise f.error("obstacles", f"duplicate obstacle name {dup[0]!r}")
+        raise f.error("obstacles", f"duplicate obstacle name {shown(dup[0])}")
     return obstacles
 
 
@@ -550,10 +558,10 @@ def _supports(f: Fields, obstacles: tuple[ObstacleSpec, ...]) -> tuple[str, ...]
     shapes = {ob.name: ob.shape for ob in obstacles}
     for i, name in enumerate(names):
         if name not in shapes:
-            raise InputError(f.file, f"supports[{i}]", f"no obstacle named {name!r} (obstacles: "
+            raise InputError(f.file, f"supports[{i}]", f"no obstacle named {shown(name)} (obstacles: "
                                                        f"{', '.join(shapes) or 'none'})")
         if shapes[name] not in ("box", "cylinder"):
-            raise InputError(f.file, f"supports[{i}]", f"obstacle {name!r} is a {shapes[name]}: expected a box "
+            raise InputError(f.file, f"supports[{i}]", f"obstacle {shown(name)} is a {shapes[name]}: expected a box "
                                                        "or a cylinder, whose flat top can hold the object")
     return names
 
@@ -563,7 +571,7 @@ def _obstacle(f: Fields) -> ObstacleSpec:
     name = f.str("name")
     given = [s for s in SHAPES if f.has(s)]
     if len(given) != 1:
-        raise f.error(None, f"obstacle {name!r}: expected exactly one of {', '.join(SHAPES)}")
+        raise f.error(None, f"obstacle {shown(name)}: expected exactly one of {', '.join(SHAPES)}")
     shape = given[0]
     X = parse_pose(f, "pose")
     g = f.sub(shape)
@@ -591,12 +599,23 @@ def _robot_conf(t: Fields, key: str) -> str | Mapping[str, float]:
     if isinstance(v, dict):
         c = t.sub(key)
         return {str(k): c.float(k) for k in c.data}
-    raise t.error(key, f"expected 'rest' or a mapping joint -> value (rad or m), found {v!r}")
+    raise t.error(key, f"expected 'rest' or a mapping joint -> value (rad or m), found {shown(v)}")
 
 
 # --------------------------------------------------------------------------- inhand.yaml
 
 INHAND_FORMAT = "regrasp.inhand/1"
+
+
+def scene_files(spec: "SceneSpec | InhandSpec") -> tuple[Path, ...]:
+    """The files a scene (pick-and-place or in-hand) reads: itself, its robot.yaml, the
+    robot's URDF and SRDF, the object's and the obstacles' meshes.  A command's output
+    must be none of them (:func:`regrasp_cli.store.check_writable`)."""
+    robot = load_robot_spec(spec.robot)
+    meshes = [ob.mesh for ob in spec.obstacles if ob.mesh is not None]
+    if not spec.object.mesh.startswith(BUILTIN_PREFIX):
+        meshes.append(Path(spec.object.mesh))
+    return (spec.file, robot.file, robot.urdf, *((robot.srdf,) if robot.srdf else ()), *meshes)
 
 
 INHAND_MODES = ("single-query", "multi-query")
@@ -643,11 +662,11 @@ def load_inhand_spec(path: str | Path) -> InhandSpec:
     f.only("format", "robot", "hand", "robot_config", "object", "object_start", "object_goal", "start_grasp",
            "planning", "obstacles")
     if f.str("format") != INHAND_FORMAT:
-        raise f.error("format", f"expected '{INHAND_FORMAT}', found {f.data['format']!r}")
+        raise f.error("format", f"expected '{INHAND_FORMAT}', found {shown(f.data['format'])}")
     robot = _robot_path(f)
     hand = f.str("hand", "right")
     if hand not in ("right", "left"):
-        raise f.error("hand", f"expected 'right' or 'left', found {hand!r}")
+        raise f.error("hand", f"expected 'right' or 'left', found {shown(hand)}")
     obj = _object(f, 0.8)  # fingertips: rubber on the object
     start = parse_pose(f, "object_start")
     g = f.sub("object_goal")
@@ -659,7 +678,7 @@ def load_inhand_spec(path: str | Path) -> InhandSpec:
     if v != "find":
         if not isinstance(v, dict) or not v:
             raise f.error("start_grasp", f"expected 'find' or a mapping finger name -> contact point [x, y, z] "
-                                         f"in the object frame, found {v!r}")
+                                         f"in the object frame, found {shown(v)}")
         s = f.sub("start_grasp")
         grasp = {str(k): s.vector(k, 3) for k in s.data}
     planning = InhandPlanning()
@@ -668,7 +687,7 @@ def load_inhand_spec(path: str | Path) -> InhandSpec:
         p.only("seed", "nodes", "step_rad", "gait_m", "smooth", "mode")
         mode = p.str("mode", planning.mode)
         if mode not in INHAND_MODES:
-            raise p.error("mode", f"expected one of {', '.join(INHAND_MODES)}, found {mode!r}")
+            raise p.error("mode", f"expected one of {', '.join(INHAND_MODES)}, found {shown(mode)}")
         planning = InhandPlanning(p.int("seed", planning.seed, minimum=0), p.int("nodes", planning.nodes, minimum=1),
                                   p.float("step_rad", planning.step_rad, positive=True, maximum=3.2),
                                   p.float("gait_m", planning.gait_m, positive=True),

@@ -7,7 +7,26 @@ name the file, the field and what was expected, so they say how to fix the probl
 
 from __future__ import annotations
 
+import reprlib
 from pathlib import Path
+
+_SHOWN = reprlib.Repr()  # keyword arguments only from Python 3.12
+_SHOWN.maxlevel, _SHOWN.maxlist, _SHOWN.maxtuple, _SHOWN.maxdict, _SHOWN.maxstring = 3, 6, 6, 4, 60
+
+
+def shown(value: object, width: int = 80) -> str:
+    """A short repr of a value a user wrote, for a message: nested containers cut after a
+    few items and levels, the whole at most ``width`` characters.  A plain ``repr`` of a
+    YAML value would expand every alias of it (a "billion laughs" of 1 KiB prints for
+    hours) and may span lines."""
+    text = _SHOWN.repr(value)
+    return one_line(text if len(text) <= width else text[: width - 3] + "...")
+
+
+def one_line(text: str) -> str:
+    """``text`` with its control characters escaped (``\\n``, ``\\x1b``): a message naming a
+    file or a value the user chose stays one line, without terminal escapes."""
+    return "".join(c if c.isprintable() or c == " " else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 class RegraspError(Exception):
@@ -31,7 +50,7 @@ class InputError(RegraspError):
         self.file = None if file is None else str(file)
         self.field = field
         self.message = message
-        where = ": ".join(p for p in (self.file, self.field) if p)
+        where = ": ".join(p for p in (self.file, self.field) if p)  # one_line'd where printed (cli)
         super().__init__(f"{where}: {message}" if where else message)
 
 

@@ -22,7 +22,7 @@ import numpy as np
 import trimesh
 
 from regrasp_cli.config import SHAPES, ObstacleSpec
-from regrasp_cli.errors import InputError, StaleArtefactError
+from regrasp_cli.errors import InputError, StaleArtefactError, shown
 from regrasp_cli.model.collision import CollisionOptions
 from regrasp_cli.model.objects import load_object_mesh
 from regrasp_cli.model.robot import Kinematics, Robot, load_robot
@@ -110,7 +110,7 @@ def _contacts(file: Path, plan: Plan, robot: Robot) -> dict[str, Contacts]:
     out = {}
     for i, g in enumerate(plan.grasps):
         if g.hand not in robot.hands:
-            raise InputError(file, f"grasps[{i}].hand", f"unknown hand {g.hand!r}; the robot has "
+            raise InputError(file, f"grasps[{i}].hand", f"unknown hand {shown(g.hand)}; the robot has "
                                                         f"{', '.join(robot.hands)}")
         _pose(file, g.X_OG, f"grasps[{i}].hand_in_object")
         fingers, points, normals = [], [], []
@@ -127,7 +127,7 @@ def _obstacle(file: Path, d: Any, i: int) -> ObstacleSpec:
     w = f"obstacles[{i}]."
     shape = _get(file, d, "shape", w, str)
     if shape not in SHAPES:
-        raise InputError(file, w + "shape", f"expected one of {', '.join(SHAPES)}, found {shape!r}")
+        raise InputError(file, w + "shape", f"expected one of {', '.join(SHAPES)}, found {shown(shape)}")
     n = {"box": 3, "cylinder": 2, "sphere": 1, "mesh": 1}[shape]
     size = _array(file, _get(file, d, "size", w, list), w + "size", (n,))
     if np.any(size <= 0):
@@ -194,7 +194,7 @@ def load_inputs(plan: Plan, file: Path) -> Inputs:
         for role in ("holding", "touching"):
             for h in getattr(p, role):
                 if not isinstance(h, str) or h not in robot.hands:
-                    raise InputError(file, f"phases[{i}].{role}", f"unknown hand {h!r}; the robot has "
+                    raise InputError(file, f"phases[{i}].{role}", f"unknown hand {shown(h)}; the robot has "
                                                                   f"{', '.join(robot.hands)}")
         if p.object_poses is not None:
             for k, X in enumerate(p.object_poses):

@@ -43,12 +43,14 @@ tuples hash like lists; numpy scalars/arrays hash like the Python values of
 from __future__ import annotations
 
 import dataclasses
+import glob
 import hashlib
 import json
 import os
 import re
+import socket
 import tempfile
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
@@ -187,16 +189,23 @@ def file_label(name: str) -> str:
 # ---------------------------------------------------------------------- atomic writes
 
 
-def check_writable(path: str | Path, field: str | None = None, folder: bool = False) -> None:
+def check_writable(path: str | Path, field: str | None = None, folder: bool = False,
+                   inputs: Iterable[str | Path] = ()) -> None:
     """Refuse, before any work, an output ``path`` (a file, or a ``folder``) that cannot
-    be written: a folder where a file is expected or the reverse, a missing parent that
-    cannot be created (a file in the way), or a folder where no file can be created
-    (probed by creating one: permission bits do not tell, e.g. for root).
+    be written: one of the command's ``inputs`` (the same file by its device and inode,
+    whatever the path, link or case that names it), a folder where a file is expected or
+    the reverse, a missing parent that cannot be created (a file in the way), or a folder
+    where no file can be created (probed by creating one: permission bits do not tell,
+    e.g. for root).
 
     Raises:
         InputError: naming ``field`` (e.g. the command-line option) and the reason.
     """
     path = Path(path)
+    for source in inputs:
+        if _same_file(path, Path(source)):
+            raise InputError(None, field, f"{path} is the input file {source} of this command; expected "
+                                          f"another file (writing it would overwrite the input)")
     if path.is_dir() and not folder:
         raise InputError(None, field, f"{path} is a folder; expected a file name")
     if path.exists() and folder and not path.is_dir():
@@ -214,19 +223,28 @@ def check_writable(path: str | Path, field: str | None = None, folder: bool = Fa
                                       f"({exc.strerror or exc})") from None
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # either is missing: an output not yet written overwrites nothing
+        return False
+
+
 def atomic_write(path: str | Path, writer: Callable[[Path], None]) -> None:
-    """Create ``path`` atomically: ``writer(tmp)`` fills ``.<name>.<pid>.tmp`` beside it,
-    which is fsynced and moved into place with ``os.replace``.
+    """Create ``path`` atomically: ``writer(tmp)`` fills ``.<name>.<host>.<pid>.tmp``
+    beside it, which is fsynced and moved into place with ``os.replace``.
 
     The parent directory is created.  If anything fails the temp file is removed, the
     previous ``path`` (if any) is left untouched, and the exception is re-raised; an
     operating-system error (no permission, disk full, a file in the way) as an
-    :class:`InputError` naming ``path``.
+    :class:`InputError` naming ``path``.  Temp files of ``path`` left by a writer of this
+    host that was killed (its process is gone) are removed first.
     """
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = path.with_name(f".{path.name}.{_HOST}.{os.getpid()}.tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
+        _remove_orphans(path)
         tmp.unlink(missing_ok=True)
         writer(tmp)
         fd = os.open(tmp, os.O_RDONLY | getattr(os, "O_BINARY", 0))
@@ -242,6 +260,28 @@ def atomic_write(path: str | Path, writer: Callable[[Path], None]) -> None:
         _remove(tmp)
         raise
     _fsync_dir(path.parent)
+
+
+_HOST = socket.gethostname().replace(".", "-") or "host"  # a shared cache's writers on other hosts are left alone
+
+
+def _remove_orphans(path: Path) -> None:
+    """Remove ``path``'s temp files whose writer, a process of this host, is gone."""
+    prefix = f".{path.name}.{_HOST}."
+    for tmp in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
+        pid = tmp.name[len(prefix):-len(".tmp")] if tmp.name.startswith(prefix) else ""
+        if pid.isdigit() and not _alive(int(pid)):
+            _remove(tmp)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # another user's process: alive
+        return True
+    return True
 
 
 def _remove(tmp: Path) -> None:

@@ -40,7 +40,8 @@ from typing import Any
 
 import numpy as np
 
-from regrasp_cli.errors import InputError
+from regrasp_cli.errors import InputError, shown
+from regrasp_cli.inputs import loads_json, read_text
 from regrasp_cli.manip.modes import KIND_NAMES, Kind
 from regrasp_cli.motion.blend import BlendedPath, Timing, blended_path, trajectory
 from regrasp_cli.motion.timing import evaluate_trajectory
@@ -48,6 +49,8 @@ from regrasp_cli.store import atomic_write_text
 
 FORMAT = "regrasp.plan/2"
 OLD_FORMATS = ("regrasp.plan/1",)
+MAX_PHASE_S = 3600.0  # s: longer phases are refused: the validator's and viewer's samples would not fit in memory
+MAX_PLAN_S = 86400.0  # s: times past this are refused, for the same reason
 
 
 @dataclass(frozen=True)
@@ -241,7 +244,7 @@ def _grasps(r: _Reader, d: dict) -> tuple[PlanGrasp, ...]:
         w = f"grasps[{i}]."
         gid = r.get(g, "id", w, str)
         if gid in seen:
-            raise r.error(w + "id", f"grasp id {gid!r} is used twice; ids must be unique")
+            raise r.error(w + "id", f"grasp id {shown(gid)} is used twice; ids must be unique")
         seen.add(gid)
         fj = tuple(r.get(g, "finger_joints", w, list))
         index = g.get("list_index")
@@ -259,11 +262,11 @@ def _placements(r: _Reader, d: dict) -> tuple[Placement, ...]:
         w = f"placements[{i}]."
         pid = r.get(p, "id", w, str)
         if any(q.id == pid for q in out):
-            raise r.error(w + "id", f"placement id {pid!r} is used twice; ids must be unique")
+            raise r.error(w + "id", f"placement id {shown(pid)} is used twice; ids must be unique")
         out.append(Placement(pid, r.array(r.get(p, "pose", w, list), w + "pose", (4, 4))))
     for need in ("start", "goal"):
         if not any(p.id == need for p in out):
-            raise r.error("placements", f"expected a placement with id {need!r} (the object's {need} pose)")
+            raise r.error("placements", f"expected a placement with id {shown(need)} (the object's {need} pose)")
     return tuple(out)
 
 
@@ -274,9 +277,9 @@ def _holding(r: _Reader, p: dict, w: str, grasps: dict[str, PlanGrasp]) -> dict[
             raise r.error(f"{w}holding.{hand}", f"expected a grasp id (string), found {type(gid).__name__}")
         if gid not in grasps:
             known = ", ".join(repr(k) for k in grasps) or "none"
-            raise r.error(f"{w}holding.{hand}", f"grasp id {gid!r} is not in grasps[] (ids: {known})")
+            raise r.error(f"{w}holding.{hand}", f"grasp id {shown(gid)} is not in grasps[] (ids: {known})")
         if grasps[gid].hand != hand:
-            raise r.error(f"{w}holding.{hand}", f"grasp {gid!r} is a grasp of the {grasps[gid].hand} hand, "
+            raise r.error(f"{w}holding.{hand}", f"grasp {shown(gid)} is a grasp of the {grasps[gid].hand} hand, "
                                                 f"not of the {hand} hand")
     return dict(holding)
 
@@ -289,13 +292,13 @@ def _kind_rules(r: _Reader, w: str, kind: Kind, holding: dict, touching: tuple, 
             raise r.error(w + "placement", f"a {kind.value} phase has the object resting: expected the id of "
                                            "one of placements[]")
         if holding:
-            raise r.error(w + "holding", f"the object rests at placement {placement!r} in a {kind.value} phase, "
+            raise r.error(w + "holding", f"the object rests at placement {shown(placement)} in a {kind.value} phase, "
                                          f"so no hand can hold it; found {', '.join(holding)}")
     elif placement is not None:
         raise r.error(w + "placement", f"the object is not resting in a {kind.value} phase; expected null, "
-                                       f"found {placement!r}")
+                                       f"found {shown(placement)}")
     if placement is not None and not any(p.id == placement for p in placements):
-        raise r.error(w + "placement", f"placement id {placement!r} is not in placements[] "
+        raise r.error(w + "placement", f"placement id {shown(placement)} is not in placements[] "
                                        f"(ids: {', '.join(repr(p.id) for p in placements)})")
     if kind in (Kind.TRANSFER, Kind.HANDOVER) and not holding:
         raise r.error(w + "holding", f"a {kind.value} phase needs a hand holding the object; found none")
@@ -315,7 +318,7 @@ def _phase(r: _Reader, p: Any, i: int, nq: int, grasps: dict[str, PlanGrasp],
     w = f"phases[{i}]."
     kind_name = r.get(p, "kind", w, str)
     if kind_name not in KIND_NAMES:
-        raise r.error(w + "kind", f"expected one of {', '.join(KIND_NAMES)}, found {kind_name!r}")
+        raise r.error(w + "kind", f"expected one of {', '.join(KIND_NAMES)}, found {shown(kind_name)}")
     kind = Kind(kind_name)
     holding = _holding(r, p, w, grasps)
     touching = tuple(r.get(p, "touching", w, list))
@@ -327,21 +330,49 @@ def _phase(r: _Reader, p: Any, i: int, nq: int, grasps: dict[str, PlanGrasp],
     if not len(wp):
         raise r.error(w + "waypoints", "expected at least one waypoint")
     times = r.array(r.get(p, "times", w, list), w + "times", (len(wp),))
+    if np.ptp(times) > MAX_PHASE_S or np.abs(times).max() > MAX_PLAN_S:
+        raise r.error(w + "times", f"times from {times.min():.6g} to {times.max():.6g} s; expected a phase of at "
+                                   f"most {MAX_PHASE_S:g} s within {MAX_PLAN_S:g} s of the plan's start")
     poses = None
     if p.get("object_poses") is not None:
         poses = r.array(p["object_poses"], w + "object_poses", (len(wp), 4, 4))
     elif kind.inhand:
         raise r.error(w + "object_poses", f"a {kind.value} phase moves the object in the hand: expected its "
                                           "pose at every waypoint")
-    contacts = None
-    if p.get("contacts") is not None:
-        c = r.get(p, "contacts", w, list)
-        if len(c) != len(wp) or not all(isinstance(x, list) for x in c):
-            raise r.error(w + "contacts", f"expected one list of contacts per waypoint ({len(wp)})")
-        contacts = tuple(tuple(x) for x in c)
+    contacts = _contacts(r, p, w, len(wp), kind)
     blends, timing = _timing(r, p, w, wp)
     return Phase(r.get(p, "name", w, str), kind, holding, touching, placement, wp, times, poses, contacts,
                  blends, timing)
+
+
+def _contacts(r: _Reader, p: dict, w: str, k: int, kind: Kind) -> tuple[tuple[dict, ...], ...] | None:
+    """A phase's ``contacts``: one list per waypoint (k) of ``{finger, point (3,), normal
+    (3,)}`` in the object frame, each finger at most once; required in in-hand phases."""
+    if p.get("contacts") is None:
+        if kind.inhand:
+            raise r.error(w + "contacts", f"an {kind.value} phase moves the object in the fingertips: expected "
+                                          "their contacts at every waypoint")
+        return None
+    c = r.get(p, "contacts", w, list)
+    if len(c) != k:
+        raise r.error(w + "contacts", f"expected one list of contacts per waypoint ({k}), found {len(c)}")
+    return tuple(_waypoint_contacts(r, x, f"{w}contacts[{i}]") for i, x in enumerate(c))
+
+
+def _waypoint_contacts(r: _Reader, x: Any, w: str) -> tuple[dict, ...]:
+    if not isinstance(x, list):
+        raise r.error(w, f"expected a list of contacts, found {type(x).__name__}")
+    out: list[dict] = []
+    for j, c in enumerate(x):
+        cw = f"{w}[{j}]"
+        if not isinstance(c, dict):
+            raise r.error(cw, f"expected a contact {{finger, point, normal}}, found {type(c).__name__}")
+        finger = r.get(c, "finger", cw + ".", str)
+        if any(o["finger"] == finger for o in out):  # one contact per finger: a second would go unchecked
+            raise r.error(cw + ".finger", f"finger {shown(finger)} has two contacts at this waypoint")
+        out.append({"finger": finger, **{key: r.array(r.get(c, key, cw + ".", list), f"{cw}.{key}", (3,))
+                                         for key in ("point", "normal")}})
+    return tuple(out)
 
 
 def _timing(r: _Reader, p: dict, w: str, wp: np.ndarray) -> tuple[np.ndarray | None, Timing | None]:
@@ -357,6 +388,9 @@ def _timing(r: _Reader, p: dict, w: str, wp: np.ndarray) -> tuple[np.ndarray | N
         raise r.error(w + "timing", f"expected s, speed and t of one length >= 2, found {len(s)}, {len(sd)}, {len(t)}")
     if np.any(np.diff(s) <= 0) or np.any(np.diff(t) <= 0) or np.any(sd < 0):
         raise r.error(w + "timing", "expected s and t strictly increasing and speed >= 0")
+    if t[-1] - t[0] > MAX_PHASE_S or np.abs(t).max() > MAX_PLAN_S:
+        raise r.error(w + "timing.t", f"times from {t[0]:.6g} to {t[-1]:.6g} s; expected a phase of at most "
+                                      f"{MAX_PHASE_S:g} s within {MAX_PLAN_S:g} s of the plan's start")
     return blends, Timing(s, sd, t)
 
 
@@ -366,13 +400,13 @@ def plan_from_dict(d: Any, file: Path) -> Plan:
         raise r.error("", "expected a JSON object")
     fmt = r.get(d, "format", "", str)
     if fmt in OLD_FORMATS:
-        raise r.error("format", f"{fmt!r} was written by an earlier regrasp; this one reads {FORMAT!r}: plan "
+        raise r.error("format", f"{shown(fmt)} was written by an earlier regrasp; this one reads {shown(FORMAT)}: plan "
                                 "again with `regrasp plan SCENE`")
     if fmt != FORMAT:
-        raise r.error("format", f"expected '{FORMAT}', found {fmt!r}")
+        raise r.error("format", f"expected '{FORMAT}', found {shown(fmt)}")
     status = r.get(d, "status", "", str)
     if status not in ("solved", "failed"):
-        raise r.error("status", f"expected 'solved' or 'failed', found {status!r}")
+        raise r.error("status", f"expected 'solved' or 'failed', found {shown(status)}")
     names = tuple(r.get(d, "joint_names", "", list))
     grasps = _grasps(r, d)
     placements = _placements(r, d)
@@ -388,12 +422,4 @@ def plan_from_dict(d: Any, file: Path) -> Plan:
 def read_plan(path: str | Path) -> Plan:
     """Load a plan JSON; malformed content raises an InputError naming the field."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InputError(path, None, f"cannot read the plan ({exc.strerror or exc})") from None
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(path, None, f"not valid JSON (line {exc.lineno}: {exc.msg})") from None
-    return plan_from_dict(d, path)
+    return plan_from_dict(loads_json(read_text(path, "plan"), path), path)

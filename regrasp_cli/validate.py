@@ -48,7 +48,7 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
-from regrasp_cli.errors import InputError
+from regrasp_cli.errors import InputError, shown
 from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
 from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collision_world
@@ -200,6 +200,16 @@ def smooth_timing_issues(phase: Phase, velocity: np.ndarray, acceleration: np.nd
     return out
 
 
+def phase_timing_issues(phase: Phase, previous: Phase | None, velocity: np.ndarray, acceleration: np.ndarray,
+                        dt: float, names: tuple[str, ...]) -> list[Issue]:
+    """Every timing check of a phase, whatever its kind: :func:`timing_issues`, and
+    :func:`smooth_timing_issues` (sampled every ``dt`` s) when it has blends and a speed grid."""
+    found = timing_issues(phase, previous, velocity, acceleration)
+    if phase.timing is not None:
+        found += smooth_timing_issues(phase, velocity, acceleration, dt, names)
+    return found
+
+
 def limit_issues(phase: Phase, joint_names: tuple[str, ...], lower: np.ndarray, upper: np.ndarray) -> list[Issue]:
     """Joint position limits at every waypoint; one issue per joint out of its range."""
     q = phase.waypoints
@@ -275,7 +285,7 @@ def object_pose_issues(phase: Phase, previous: Phase | None, poses: tuple, previ
     the object is."""
     out = []
     if previous_poses is not None and (off := _pose_differs(previous_poses[1], poses[0])):
-        where = f"placement {phase.placement!r}" if phase.placement is not None else "its pose"
+        where = f"placement {shown(phase.placement)}" if phase.placement is not None else "its pose"
         since = "the start placement" if previous is None else f"the end of phase {previous.name}"
         out.append(Issue(phase.name, 0, "attachment", f"the object jumps by {off} between {since} and {where}"))
     if phase.object_poses is not None:
@@ -415,7 +425,7 @@ def contact_issues(plan: Plan, inputs: Inputs) -> list[Issue]:
         fingers = [f.name for f in hand.spec.fingers]
         for f in c.fingers:
             if f not in fingers:
-                issue(f"contact of unknown finger {f!r} (the hand has {', '.join(fingers)})")
+                issue(f"contact of unknown finger {shown(f)} (the hand has {', '.join(fingers)})")
         if len(set(c.fingers)) != len(c.fingers):
             issue("two contacts of one finger")
         units = np.linalg.norm(c.normals, axis=1)
@@ -542,12 +552,12 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
     if plan.task == "inhand":  # a hand turning the object in its fingers (seed 003)
         from regrasp_cli.validate_inhand import validate_inhand
 
-        return validate_inhand(plan, path, inputs, resolution)
+        return validate_inhand(plan, path, inputs, resolution, dt)
     mixed = next((k for k, p in enumerate(plan.phases) if p.kind.inhand), None)
     if mixed is not None:
         raise InputError(path, f"phases[{mixed}].kind", f"{plan.phases[mixed].kind.value} phases are checked in an "
                                                         f"in-hand plan (task 'inhand') only: this version cannot "
-                                                        f"validate them in a {plan.task!r} plan")
+                                                        f"validate them in a {shown(plan.task)} plan")
     robot, reach, kin = inputs.robot, joint_reach(inputs.robot), Kinematics(inputs.robot)
     issues = [Issue(None, None, "input", note) for note in inputs.notes]
     carries, poses = follow(path, plan, kin)
@@ -556,9 +566,7 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         t0 = perf_counter()
         previous = plan.phases[k - 1] if k else None
         found = continuity_issues(phase, previous, robot.joint_names)
-        found += timing_issues(phase, previous, inputs.velocity, inputs.acceleration)
-        if phase.timing is not None:
-            found += smooth_timing_issues(phase, inputs.velocity, inputs.acceleration, dt, robot.joint_names)
+        found += phase_timing_issues(phase, previous, inputs.velocity, inputs.acceleration, dt, robot.joint_names)
         found += limit_issues(phase, robot.joint_names, inputs.lower, inputs.upper)
         found += attachment_issues(plan, phase, kin, carries[k])
         found += kind_issues(phase, robot)

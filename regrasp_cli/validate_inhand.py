@@ -5,8 +5,10 @@ Like :mod:`regrasp_cli.validate` it trusts nothing the planner computed (it neve
 it): it reloads the robot and the object mesh by the plan's hashes and checks, from the
 phases' kinds, per-waypoint object poses and contacts:
 
-* **continuity, timing, limits**: as for every plan (:mod:`regrasp_cli.validate`);
-* **kind**: only the touching hand's finger joints move (the wrist is fixed); in a
+* **continuity, timing, limits**: the functions that check every plan
+  (:mod:`regrasp_cli.validate`), a speed grid's velocities and accelerations included;
+* **kind**: every waypoint a stop (no blend: the motion between two is checked
+  straight); only the touching hand's finger joints move (the wrist is fixed); in a
   transfer no contact changes (each is fixed on the object) and every finger touches; in
   a regrasp the object stays still, one finger leaves its contact (it is missing from the
   waypoints between the first and the last), the others keep theirs, and all touch at
@@ -32,6 +34,7 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation, Slerp
 
+from regrasp_cli.errors import shown
 from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
 from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import ObjectPlacement, collision_world
@@ -40,7 +43,7 @@ from regrasp_cli.replay import Inputs
 from regrasp_cli.trajectory import Phase, Plan
 from regrasp_cli.validate import (CONE_EDGES, NORMAL_TOL, SURFACE_TOL, TIP_TOL, Issue, PhaseSummary,
                                   ValidationReport, _pose_differs, _surface, continuity_issues, limit_issues,
-                                  timing_issues)
+                                  phase_timing_issues)
 
 STEP_M, STEP_RAD = 0.01, 0.1  # the object's largest move between two waypoints: more is a jump
 FINGER_TOL = 1e-9  # rad: joints that must not move
@@ -106,9 +109,10 @@ class _Checker:
         if not phase.kind.inhand or len(phase.touching) != 1 or phase.holding:
             return [Issue(phase.name, None, "kind", f"an in-hand plan has only inhand-transfer and inhand-regrasp "
                                                     f"phases touching one hand; found a {phase.kind.value} phase")]
-        if phase.contacts is None or phase.object_poses is None:
-            return [Issue(phase.name, None, "kind", "an in-hand phase needs object_poses and contacts at every "
-                                                    "waypoint")]
+        if phase.blends is not None and (cut := np.flatnonzero(phase.blends > 0)).size:
+            out.append(Issue(phase.name, int(cut[0]), "kind", f"a blend of radius {phase.blends[cut[0]]:.3g}: an "
+                                                              "in-hand phase stops at every waypoint (its motion is "
+                                                              "checked on straight segments)"))
         hand = self.robot.hands[phase.touching[0]]
         names = self.fingers(phase.touching[0])
         q, X = phase.waypoints, phase.object_poses
@@ -173,7 +177,7 @@ class _Checker:
         for i, c in enumerate(sets):
             for f, (p, n) in c.items():
                 if f not in names:
-                    return [Issue(phase.name, i, "grasp", f"contact of unknown finger {f!r}")]
+                    return [Issue(phase.name, i, "grasp", f"contact of unknown finger {shown(f)}")]
                 if msg := self.on_surface(f, p, n):
                     return [Issue(phase.name, i, "grasp", msg)]
                 j = names[f]
@@ -213,8 +217,10 @@ class _Checker:
         return [], n
 
 
-def validate_inhand(plan: Plan, path: Path, inputs: Inputs, resolution: float) -> ValidationReport:
-    """Check the in-hand plan ``plan`` read from ``path`` (see the module docstring)."""
+def validate_inhand(plan: Plan, path: Path, inputs: Inputs, resolution: float, dt: float) -> ValidationReport:
+    """Check the in-hand plan ``plan`` read from ``path`` (see the module docstring);
+    ``resolution`` (rad) between collision-checked samples, ``dt`` (s) between the
+    timing's samples of a phase with blends."""
     ch = _Checker(plan, inputs)
     issues = [Issue(None, None, "input", note) for note in inputs.notes]
     summaries, seconds = [], {}
@@ -222,7 +228,7 @@ def validate_inhand(plan: Plan, path: Path, inputs: Inputs, resolution: float) -
         t0 = perf_counter()
         previous = plan.phases[k - 1] if k else None
         found = continuity_issues(phase, previous, ch.robot.joint_names)
-        found += timing_issues(phase, previous, inputs.velocity, inputs.acceleration)
+        found += phase_timing_issues(phase, previous, inputs.velocity, inputs.acceleration, dt, ch.robot.joint_names)
         found += limit_issues(phase, ch.robot.joint_names, inputs.lower, inputs.upper)
         found += ch.phase_issues(phase, previous)
         hits, n = ch.collisions(phase, resolution) if phase.object_poses is not None else ([], 0)
@@ -234,7 +240,7 @@ def validate_inhand(plan: Plan, path: Path, inputs: Inputs, resolution: float) -
         placement = plan.placement(pid)
         if placement is None:
             issues.append(Issue(None, None, "attachment", f"an in-hand plan records the object's {pid} pose in "
-                                                          f"placements[] (id {pid!r})"))
+                                                          f"placements[] (id {shown(pid)})"))
         elif plan.phases and plan.phases[k].object_poses is not None and \
                 (off := _pose_differs(plan.phases[k].object_poses[i], placement.X_WO)):
             issues.append(Issue(plan.phases[k].name, None, "attachment", f"the object is {off} away from its {pid} "

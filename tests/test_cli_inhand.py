@@ -119,7 +119,7 @@ def test_an_object_too_big_for_the_hand_is_one_line(tmp_path, cache_dir):
 def test_a_goal_out_of_the_fingers_reach_is_one_line(tmp_path, cache_dir):
     scene = write_scene(tmp_path / "s.yaml", _scene(object_goal={"xyz": [0.0, 0.0, 0.3], "rpy": [0, 0, 0]}))
     result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "p.json")
-    assert_one_error_line(result, str(scene), "object_goal", "cannot reach")
+    assert_one_error_line(result, str(scene), ": object_goal: ", "beyond the reach")
     assert not (tmp_path / "p.json").exists()
 
 

@@ -36,7 +36,7 @@ PKG = "regrasp_cli"
 # lowest first; "x.*" is the module x (a package) and everything under it, "x" that module
 # alone; the most specific entry wins (so "manip.modes" is L0 inside L4's "manip.*")
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("", "errors", "spatial", "examples", "config", "store", "parallel", "manip.modes"),  # "": the package __init__
+    ("", "errors", "spatial", "examples", "config", "inputs", "store", "parallel", "manip.modes"),  # "": the package __init__
     ("model.*", "grasp.*", "placement.*", "scene", "motion.*"),
     ("roadmap.*",),
     ("trajectory", "replay", "artefacts"),

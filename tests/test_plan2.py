@@ -220,12 +220,12 @@ def _holding_while_resting(d: dict) -> str:
 
 
 def _inhand(d: dict) -> str:
-    """The carry made an in-hand transfer (well-formed, object poses given): the validator
+    """The carry made an in-hand transfer (well-formed, object poses and contacts given): the validator
     checks those in in-hand plans only, and says so rather than accepting it."""
     p = d["phases"][2]
     assert p["kind"] == "transfer"
     p.update(kind="inhand-transfer", holding={}, touching=["right"],
-             object_poses=[np.eye(4).tolist()] * len(p["waypoints"]))
+             object_poses=[np.eye(4).tolist()] * len(p["waypoints"]), contacts=[[]] * len(p["waypoints"]))
     return "phases[2].kind"
 
 

@@ -8,19 +8,23 @@ hand's grasp frame), the run writes the in-hand scene (``OUT/scenes/``), plans i
 `regrasp validate`.  A run is solved when the plan is valid.
 
 Fields: ``name``; ``hands`` (each ``{robot, side, label, objects}``: a robot.yaml path
-relative to the suite or ``builtin:NAME``, the hand's side (default right), a label, and
-the labels of the objects it is given, default all); ``objects`` (each ``{mesh, scale,
-friction, label, optional}``, paths relative to the suite file; ``optional: true`` skips a
-missing file, for meshes not shipped); ``goals`` (runs per hand and object, default 20),
-from ``first_goal`` (default 0); ``nodes`` (the trees' budget of expansions, default a
+relative to the suite or ``builtin:NAME``, the hand's side (default right), a label
+(default the robot's file stem or built-in name), and the labels of the objects it is
+given, default all); ``objects`` (each ``{mesh, scale, friction, label, optional}``,
+paths relative to the suite file, the label's default the mesh's; ``optional: true``
+skips a missing file, for meshes not shipped); the name and the labels name files and
+folders (letters, digits, '.', '_', '-', as a pick-and-place suite's name); ``goals``
+(runs per hand and object, default 20), from ``first_goal`` (default 0); ``nodes`` (the trees' budget of expansions, default a
 scene's, ``InhandPlanning.nodes``); ``mode`` (``single-query`` or ``multi-query``, default
 single-query: with multi-query, each hand and object's roadmap is learned before the
 runs, and its time reported apart).  Every error is an :class:`InputError` naming the
-file and field.
+file and field, the suite's for a bad hand or object found only when a run's scene is
+loaded (each hand and object's is loaded before anything is written).
 """
 
 from __future__ import annotations
 
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,8 +33,9 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
+from regrasp_cli.bench.suite import MAX_SEEDS, file_name
 from regrasp_cli.config import INHAND_MODES, Fields, InhandPlanning, read_yaml, resolve_path
-from regrasp_cli.errors import InputError, RegraspError
+from regrasp_cli.errors import InputError, RegraspError, shown
 
 INHAND_SUITE_FORMAT = "regrasp.inhand-bench/1"
 
@@ -41,6 +46,7 @@ class InhandObject:
     label: str
     scale: float = 1.0
     friction: float = 0.8
+    field: str = "objects"  # where the suite file gives it, e.g. objects[2]
 
 
 @dataclass(frozen=True)
@@ -49,6 +55,7 @@ class InhandHand:
     side: str
     label: str
     objects: tuple[str, ...]  # object labels
+    field: str = "hands"  # where the suite file gives it, e.g. hands[0]
 
 
 @dataclass(frozen=True)
@@ -75,15 +82,18 @@ def load_inhand_suite(path: str | Path) -> InhandSuite:
     f = Fields(file, data)
     f.only("format", "name", "hands", "objects", "goals", "first_goal", "nodes", "mode")
     if f.str("format") != INHAND_SUITE_FORMAT:
-        raise f.error("format", f"expected {INHAND_SUITE_FORMAT!r}, found {f.data['format']!r}")
+        raise f.error("format", f"expected {shown(INHAND_SUITE_FORMAT)}, found {shown(f.data['format'])}")
     objects, skipped = _objects(f)
     labels = {o.label for o in objects} | set(skipped)
     hands = _hands(f, labels)
     goals, first = f.int("goals", 20, minimum=1), f.int("first_goal", 0, minimum=0)
+    if goals > MAX_SEEDS:
+        raise f.error("goals", f"expected at most {MAX_SEEDS:,} goals, found {goals}")
     mode = f.str("mode", "single-query")
     if mode not in INHAND_MODES:
-        raise f.error("mode", f"expected one of {', '.join(INHAND_MODES)}, found {mode!r}")
-    return InhandSuite(file, f.str("name"), hands, objects, tuple(range(first, first + goals)),
+        raise f.error("mode", f"expected one of {', '.join(INHAND_MODES)}, found {shown(mode)}")
+    name = file_name(file, "name", f.str("name"), "the results folder")
+    return InhandSuite(file, name, hands, objects, tuple(range(first, first + goals)),
                        f.int("nodes", InhandPlanning.nodes, minimum=1), mode, skipped)
 
 
@@ -96,7 +106,8 @@ def _objects(f: Fields) -> tuple[tuple[InhandObject, ...], tuple[str, ...]]:
         o = Fields(f.file, raw[i], f"objects[{i}]")
         o.only("mesh", "label", "scale", "friction", "optional")
         mesh = o.str("mesh")
-        label = o.str("label", Path(mesh).stem.replace("builtin:", ""))
+        label = file_name(f.file, f"objects[{i}].label", o.str("label", Path(mesh).stem.replace("builtin:", "")),
+                          "the runs' scene and plan files")
         if not mesh.startswith("builtin:"):
             path = resolve_path(f.file, f"objects[{i}].mesh", mesh, must_exist=False)
             if not path.is_file():
@@ -106,7 +117,7 @@ def _objects(f: Fields) -> tuple[tuple[InhandObject, ...], tuple[str, ...]]:
                 raise o.error("mesh", f"no such file {path}")
             mesh = str(path)
         out.append(InhandObject(mesh, label, o.float("scale", 1.0, positive=True),
-                                o.float("friction", 0.8, positive=True)))
+                                o.float("friction", 0.8, positive=True), f"objects[{i}]"))
     if len({o.label for o in out}) != len(out):
         raise f.error("objects", "two objects have the same label")
     return tuple(out), tuple(skipped)
@@ -127,32 +138,78 @@ def _hands(f: Fields, labels: set[str]) -> tuple[InhandHand, ...]:
         unknown = [o for o in objects if o not in labels]
         if unknown:
             raise h.error("objects", f"no object labelled {', '.join(unknown)} (objects: {', '.join(sorted(labels))})")
-        out.append(InhandHand(robot, h.str("side", "right"), h.str("label", Path(robot).stem), objects))
+        label = file_name(f.file, f"hands[{i}].label", h.str("label", Path(robot).stem.replace("builtin:", "")),
+                          "the runs' scene and plan files")
+        out.append(InhandHand(robot, h.str("side", "right"), label, objects, f"hands[{i}]"))
+    if len({h.label for h in out}) != len(out):
+        raise f.error("hands", "two hands have the same label")
     return tuple(out)
 
 
-def items_of(suite: InhandSuite, out: Path) -> list[dict]:
-    """One run per hand, object and goal; each run's scene written to ``out/scenes/``."""
+def items_of(suite: InhandSuite, out: Path, cache_dir: Path | None) -> list[dict]:
+    """One run per hand, object and goal, its scene written to ``out/scenes/`` once each
+    hand and object's problem has loaded as the runs will load it: a bad one is an
+    InputError naming the suite's field, and nothing is written."""
     from regrasp_cli.model.objects import load_object_mesh
 
+    scenes: dict[Path, dict] = {}
     items = []
-    (out / "scenes").mkdir(parents=True, exist_ok=True)
     for h in suite.hands:
         for o in (o for o in suite.objects if o.label in h.objects):
-            obj = load_object_mesh(o.mesh, base_dir=suite.file.parent, scale=o.scale)
+            obj = load_object_mesh(o.mesh, base_dir=suite.file.parent, scale=o.scale, file=suite.file,
+                                   field=f"{o.field}.mesh")
             centre = obj.mesh.bounds.mean(axis=0)
             for k in suite.goals:
                 rpy = Rotation.random(random_state=np.random.default_rng(k)).as_euler("xyz")
-                scene = {"format": "regrasp.inhand/1", "robot": h.robot, "hand": h.side,
-                         "object": {"mesh": o.mesh, "scale": o.scale, "friction": o.friction},
-                         "object_start": {"xyz": [float(-x) for x in centre]},
-                         "object_goal": {"rpy": [float(x) for x in rpy]},
-                         "planning": {"seed": k, "nodes": suite.nodes, "mode": suite.mode}}
                 path = out / "scenes" / f"{h.label}-{o.label}-{k:02d}.yaml"
-                path.write_text(yaml.safe_dump(scene, sort_keys=False))
+                if path in scenes:  # labels joined by '-' can meet: a-b + c, a + b-c
+                    raise InputError(suite.file, f"{h.field}.label", f"with object {o.label}, its scenes are named "
+                                     f"as another hand and object's ({path.name}): choose another label")
+                scenes[path] = _scene(suite, h, o, [float(-x) for x in centre], rpy, k)
                 items.append({"hand": h.label, "object": o.label, "goal": k, "scene": str(path),
                               "goal_angle_rad": float(Rotation.from_euler("xyz", rpy).magnitude())})
+            _check_scene(suite, h, o, scenes[path], cache_dir)  # the goals' scenes differ in goal and seed only
+    (out / "scenes").mkdir(parents=True, exist_ok=True)
+    for path, scene in scenes.items():
+        path.write_text(yaml.safe_dump(scene, sort_keys=False))
     return items
+
+
+def _scene(suite: InhandSuite, h: InhandHand, o: InhandObject, p_GO: list[float], rpy: np.ndarray,
+           seed: int) -> dict:
+    """The in-hand scene of one run: the object's centre at the grasp frame (``p_GO``, m),
+    turned to ``rpy`` (rad)."""
+    return {"format": "regrasp.inhand/1", "robot": h.robot, "hand": h.side,
+            "object": {"mesh": o.mesh, "scale": o.scale, "friction": o.friction},
+            "object_start": {"xyz": p_GO}, "object_goal": {"rpy": [float(x) for x in rpy]},
+            "planning": {"seed": seed, "nodes": suite.nodes, "mode": suite.mode}}
+
+
+def _check_scene(suite: InhandSuite, h: InhandHand, o: InhandObject, scene: dict, cache_dir: Path | None) -> None:
+    """Load the problem of ``scene`` (hand ``h`` and object ``o``'s) from a temporary
+    copy: an InputError in it names the suite's field it comes from instead (the
+    generated file is the bench's, not the user's); others, e.g. a robot.yaml's, as they are."""
+    from regrasp_cli.dexterous.task import load_inhand_problem
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "scene.yaml"
+        path.write_text(yaml.safe_dump(scene, sort_keys=False))
+        try:
+            load_inhand_problem(path, cache_dir)
+        except InputError as exc:
+            if exc.file is None or Path(exc.file).resolve() != path.resolve():
+                raise
+            raise InputError(suite.file, _suite_field(exc.field, h, o), exc.message) from None
+
+
+def _suite_field(field: str | None, h: InhandHand, o: InhandObject) -> str:
+    """The suite's field that a generated scene's ``field`` comes from."""
+    head, _, rest = (field or "").partition(".")
+    if head == "object":
+        return f"{o.field}.{rest}" if rest else o.field
+    if head == "planning" and rest in ("nodes", "mode"):
+        return rest
+    return {"robot": f"{h.field}.robot", "hand": f"{h.field}.side"}.get(head, h.field)
 
 
 def prepare(items: list[dict], cache_dir: Path, mode: str, notice=None) -> dict[str, float]:

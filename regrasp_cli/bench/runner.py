@@ -111,12 +111,14 @@ def offline_stages(suite: Suite, cache_dir: Path, jobs: int, builder=None) -> di
     from regrasp_cli.scene import load_problem
 
     need_roadmap = REFERENCE in suite.planners
+    rows, problems = {}, {}
+    for scene in suite.scenes:  # every scene read before any is built on: a bad one is refused at once
+        t0 = time.perf_counter()
+        problems[scene] = load_problem(scene, cache_dir)
+        rows[scene] = {"problem": {"s": time.perf_counter() - t0, "status": "loaded"}}
     out = {}
     for scene, label in scene_labels(suite).items():
-        row = {}
-        t0 = time.perf_counter()
-        problem = load_problem(scene, cache_dir)
-        row["problem"] = {"s": time.perf_counter() - t0, "status": "loaded"}
+        row, problem = rows[scene], problems[scene]
         for what, folder, roadmap in (("grasp lists", "grasps", False), ("roadmap", "roadmap", True)):
             if roadmap and not need_roadmap:
                 continue

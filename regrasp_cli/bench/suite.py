@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from regrasp_cli.config import Fields, read_yaml, resolve_path
-from regrasp_cli.errors import InputError
+from regrasp_cli.errors import InputError, shown
 from regrasp_cli.roadmap.build import RoadmapOptions
 
 SUITE_FORMAT = "regrasp.bench/1"
@@ -32,9 +32,10 @@ REFERENCE = "roadmap"
 DEFAULT_SEEDS = 20
 DEFAULT_BUDGET_S = 60.0
 DEFAULT_ITERATIONS = 3000  # OnlineOptions().rrt.max_iterations
+MAX_SEEDS = 10_000  # runs per scene and planner: 10,000 plans of 2 s are most of a day already
 STYLES = ("auto", "one-arm", "handover", "place-regrasp", "seed000")  # regrasp plan --style
 SAMPLERS = ("faces", "vis-prm")  # regrasp plan --sampler
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+_FILE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")  # one path component, never '..'
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,7 @@ def _planners(file: Path | None, field: str, names: list) -> tuple[str, ...]:
         raise InputError(file, field, f"expected at least one planner of: {', '.join(PLANNERS)}")
     for name in names:
         if name not in PLANNERS:
-            raise InputError(file, field, f"unknown planner {name!r}; expected one of: {', '.join(PLANNERS)}")
+            raise InputError(file, field, f"unknown planner {shown(name)}; expected one of: {', '.join(PLANNERS)}")
     if len(set(names)) != len(names):
         raise InputError(file, field, "a planner is listed twice")
     return tuple(names)
@@ -72,11 +73,8 @@ def load_suite(path: str | Path) -> Suite:
            "grasp_target", "style", "exhaustive", "sampler")
     fmt = f.str("format")
     if fmt != SUITE_FORMAT:
-        raise f.error("format", f"expected {SUITE_FORMAT!r}, found {fmt!r}")
-    name = f.str("name")
-    if not _NAME.match(name):
-        raise f.error("name", f"expected letters, digits, '.', '_' or '-' (it names the results folder), "
-                              f"found {name!r}")
+        raise f.error("format", f"expected {shown(SUITE_FORMAT)}, found {shown(fmt)}")
+    name = file_name(file, "name", f.str("name"), "the results folder")
     scenes = f.raw("scenes")
     if not isinstance(scenes, list) or not scenes or not all(isinstance(s, str) and s for s in scenes):
         raise f.error("scenes", "expected a non-empty list of scene.yaml paths (relative to the suite file)")
@@ -95,28 +93,38 @@ def load_suite(path: str | Path) -> Suite:
         target = f.int("grasp_target", minimum=0)
     style = f.str("style", "auto")
     if style not in STYLES:
-        raise f.error("style", f"expected one of {', '.join(STYLES)}, found {style!r}")
+        raise f.error("style", f"expected one of {', '.join(STYLES)}, found {shown(style)}")
     sampler = f.str("sampler", "faces")
     if sampler not in SAMPLERS:
-        raise f.error("sampler", f"expected one of {', '.join(SAMPLERS)}, found {sampler!r}")
+        raise f.error("sampler", f"expected one of {', '.join(SAMPLERS)}, found {shown(sampler)}")
     return Suite(file, name, scene_paths, _planners(file, "planners", planners), seeds, float(budget), nodes, target,
                  iterations, style, f.int("exhaustive", 0, minimum=0), sampler)
 
 
+def file_name(file: Path | None, field: str, value: str, names: str) -> str:
+    """``value`` when it can name a file or folder inside another one (letters, digits,
+    '.', '_' or '-', first a letter or digit: no separator, no '..'), else an InputError
+    saying it ``names`` (e.g. "the results folder")."""
+    if not _FILE_NAME.fullmatch(value):
+        raise InputError(file, field, f"expected letters, digits, '.', '_' or '-' (it names {names}), found {shown(value)}")
+    return value
+
+
 def seeds_of(file: Path | None, field: str, value) -> tuple[int, ...]:
-    """A count N (seeds 0 .. N-1) or a list of distinct integers >= 0."""
+    """A count N (seeds 0 .. N-1, at most :data:`MAX_SEEDS`) or a list of distinct
+    integers >= 0."""
     if isinstance(value, bool):
         raise InputError(file, field, "expected a count or a list of integer seeds, found bool")
     if isinstance(value, int):
-        if value < 1:
-            raise InputError(file, field, f"expected a count >= 1, found {value}")
+        if not 1 <= value <= MAX_SEEDS:
+            raise InputError(file, field, f"expected a count from 1 to {MAX_SEEDS:,}, found {value}")
         return tuple(range(value))
     if isinstance(value, list) and value and all(isinstance(s, int) and not isinstance(s, bool) and s >= 0
                                                   for s in value):
         if len(set(value)) != len(value):
             raise InputError(file, field, "a seed is listed twice")
         return tuple(value)
-    raise InputError(file, field, f"expected a count >= 1 or a non-empty list of integers >= 0, found {value!r}")
+    raise InputError(file, field, f"expected a count >= 1 or a non-empty list of integers >= 0, found {shown(value)}")
 
 
 def with_overrides(suite: Suite, seeds: int | None = None, planners: str | None = None,

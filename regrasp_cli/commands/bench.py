@@ -69,6 +69,7 @@ def dask_client(scheduler: str | None):
         from distributed import Client
     except ImportError:
         raise InputError(None, "--backend", "dask needs the optional extra: pip install 'regrasp[dask]'") from None
+    _check_address(scheduler)
     try:
         client = Client(scheduler, timeout=10, set_as_default=False)
     except (OSError, ValueError) as exc:  # refused, timed out (TimeoutError is an OSError), bad address
@@ -82,6 +83,24 @@ def dask_client(scheduler: str | None):
         raise InputError(None, "--scheduler", f"the Dask scheduler at {scheduler} has no worker (waited 10 s)") \
             from None
     return client
+
+
+def _check_address(scheduler: str) -> None:
+    """Refuse a scheduler address that a ``distributed.Client`` would fail on other than by
+    a network error (its OSError): such a Client is left half made, and when collected it
+    waits 20 s to close, then prints a traceback."""
+    from distributed.comm import get_address_host_port, parse_address
+    from distributed.security import Security
+
+    try:
+        _, port = get_address_host_port(scheduler)
+        if not 0 < port < 65536:
+            raise ValueError(f"port {port} is not in 1-65535")
+        if parse_address(scheduler)[0] == "tls" and Security().get_connection_args("client")["ssl_context"] is None:
+            raise ValueError("it needs Dask's TLS settings (distributed.comm.tls.ca-file, .client.cert, .client.key)")
+    except (OSError, ValueError) as exc:  # OSError: a TLS file of the Dask configuration not found
+        raise InputError(None, "--scheduler", f"expected an address such as tcp://host:8786, found {scheduler!r}: "
+                                              f"{' '.join(str(exc).split())}") from None
 
 
 def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int, seeds: int | None = None,
@@ -125,10 +144,9 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
     suite: Suite = with_overrides(load_suite(suite_file), seeds, planners, budget_s, iterations)
     out_dir = Path("bench-results") / suite.name if out_dir is None else Path(out_dir)
     check_writable(out_dir, "--output", folder=True)
+    offline = offline_stages(suite, cache_dir, jobs, CliBuilder(err))  # bad scenes refused before out_dir exists
     plan_dir = out_dir / "plans"
     plan_dir.mkdir(parents=True, exist_ok=True)
-
-    offline = offline_stages(suite, cache_dir, jobs, CliBuilder(err))
     items = items_of(suite, cache_dir, plan_dir)
     meta = {"machine": machine(), "suite": {"file": str(suite.file), "name": suite.name,
                                             "scenes": [str(s) for s in suite.scenes],
@@ -201,7 +219,7 @@ def run_inhand_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jo
     err = Console(stderr=True)
     for label in suite.skipped:
         err.print(f"skipped (mesh not found, optional): {label}", markup=False, highlight=False)
-    items = inhand.items_of(suite, out_dir)
+    items = inhand.items_of(suite, out_dir, cache_dir)
     learned = inhand.prepare(items, cache_dir, suite.mode, lambda text: err.print(text, markup=False, highlight=False))
     meta = {"machine": machine(), "suite": {"file": str(suite.file), "name": suite.name, "mode": suite.mode,
                                             "goals": list(suite.goals), "nodes": suite.nodes},

@@ -9,6 +9,8 @@ from pathlib import Path
 
 from rich.console import Console
 
+from regrasp_cli.commands.report import CliBuilder
+from regrasp_cli.config import load_inhand_spec, scene_files
 from regrasp_cli.dexterous.record import make_inhand_plan
 from regrasp_cli.dexterous.task import load_inhand_problem, plan_inhand
 from regrasp_cli.store import check_writable
@@ -22,7 +24,7 @@ def run_inhand_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | No
     from regrasp_cli.commands.validate import check_written
 
     console = console or Console()
-    check_writable(out_file, "--output")
+    check_writable(out_file, "--output", inputs=scene_files(load_inhand_spec(scene)))
     problem = load_inhand_problem(scene, cache_dir)
     if mode is not None:
         problem = replace(problem, spec=replace(problem.spec, planning=replace(problem.spec.planning, mode=mode)))
@@ -33,7 +35,7 @@ def run_inhand_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | No
         def progress(done: int, budget: int) -> None:
             if done % 25 == 0:  # a redraw costs more than an expansion's bookkeeping
                 status.update(f"{what}: {done} of {budget} expansions")
-        out = plan_inhand(problem, cache_dir, seed, progress)
+        out = plan_inhand(problem, cache_dir, seed, progress, CliBuilder(console))
     plan = make_inhand_plan(problem, out, seed, out_file, cache_dir, timings)
     write_plan(out_file, plan)
     st = out.stats
@@ -69,7 +71,8 @@ def run_inhand_roadmap(scene: Path, cache_dir: Path, console: Console | None = N
     t = perf_counter()
     with Progress(console=console, transient=True) as bar:
         task = bar.add_task("learning the GS_n roadmap (grasps joined)", total=None)
-        rm, st, built = inhand_roadmap(problem, cache_dir, progress=lambda k, n: bar.update(task, completed=k, total=n))
+        rm, st, built = inhand_roadmap(problem, cache_dir, progress=lambda k, n: bar.update(task, completed=k, total=n),
+                                       builder=CliBuilder(console))
     edges = len(rm.edges)
     if not built:
         console.print(f"roadmap fresh in the cache: {len(rm.nodes)} nodes, {edges} edges")

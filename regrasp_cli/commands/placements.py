@@ -69,13 +69,14 @@ def show_placements(file: Path, scene: Path | None, png: Path | None, console: C
     """Print a placements artefact (checked against ``scene``'s object when given) and, with
     ``png``, draw them."""
     from regrasp_cli.placement.artefact import provenance, read_placements
+    from regrasp_cli.commands.progress import scene_inputs
     from regrasp_cli.store import check_writable, read_provenance
 
     console = console or Console()
     if png is not None:
         if scene is None:
             raise InputError(None, "--png", "drawing the placements needs --scene (the object's mesh)")
-        check_writable(png, "--png")
+        check_writable(png, "--png", inputs=(file, *scene_inputs(scene)))
     stored = expected = read_provenance(file)
     spec = obj = None
     if scene is not None:  # refused when built for another mesh

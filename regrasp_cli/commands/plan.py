@@ -26,7 +26,7 @@ from regrasp_cli.manip.solve import Outcome
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.manip.tasks import handover, manipulation
 from regrasp_cli.roadmap.build import RoadmapOptions
-from regrasp_cli.commands.progress import load_problem_shown
+from regrasp_cli.commands.progress import load_problem_shown, scene_inputs
 from regrasp_cli.store import check_writable
 from regrasp_cli.trajectory import Plan, write_plan, write_refused
 
@@ -67,7 +67,11 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     from regrasp_cli.commands.validate import check_written
 
     console = console or Console()
-    check_writable(out_file, "--output")  # before the work, not after it
+    for value, name, least in ((roadmap_nodes, "--roadmap-nodes", 1), (grasp_target, "--grasp-target", 0),
+                               (jobs, "--jobs", 1)):
+        if value is not None and value < least:  # named as this command spells them, not as the builds do
+            raise InputError(None, name, f"expected an integer >= {least}, found {value}")
+    check_writable(out_file, "--output", inputs=scene_inputs(scene))  # before the work, not after it
     if planner == "ompl-rrtconnect":
         ompl_version()  # InputError naming the extra before anything is loaded
     problem = load_problem_shown(scene, cache_dir)

@@ -40,3 +40,11 @@ def load_problem_shown(scene: str | Path, cache_dir: Path | None) -> Problem:
     """:func:`~regrasp_cli.scene.load_problem` with the self-collision bar."""
     with self_collision_bar() as progress:
         return load_problem(scene, cache_dir, progress)
+
+
+def scene_inputs(scene: Path | None) -> tuple[Path, ...]:
+    """The files the pick-and-place scene ``scene`` reads (none without one): outputs
+    must differ from them.  A malformed scene raises the InputError its loading would."""
+    from regrasp_cli.config import load_scene_spec, scene_files
+
+    return () if scene is None else scene_files(load_scene_spec(scene))

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import click
 
+from regrasp_cli.commands.progress import scene_inputs
 from regrasp_cli.errors import InputError
 from regrasp_cli.store import check_writable
 from regrasp_cli.show.motion import MAX_FPS
@@ -33,8 +34,8 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def _output_file(path: Path, option: str) -> None:
-    check_writable(path, option)
+def _output_file(path: Path, option: str, inputs: tuple[Path, ...]) -> None:
+    check_writable(path, option, inputs=inputs)
 
 
 def run_show(plan_file: Path, html: Path | None, png: Path | None, fps: int, size: str, source: str) -> None:
@@ -48,7 +49,7 @@ def run_show(plan_file: Path, html: Path | None, png: Path | None, fps: int, siz
         raise InputError(None, "--fps", f"expected frames per second in [1, {MAX_FPS}], found {fps}")
     wh = parse_size(size)
     if html is not None:
-        _output_file(html, "--html")
+        _output_file(html, "--html", (plan_file,))
     if png is not None:
         check_writable(png, "--png", folder=True)
     view = load_plan_view(plan_file)
@@ -66,8 +67,9 @@ def run_show(plan_file: Path, html: Path | None, png: Path | None, fps: int, siz
             click.echo(f"png: {path}")
 
 
-def check_grasps_png(png: Path | None, scene: Path | None, best: int) -> None:
-    """The options of `grasps show --png`, checked before anything is printed."""
+def check_grasps_png(png: Path | None, scene: Path | None, best: int, file: Path) -> None:
+    """The options of `grasps show --png` (of the grasp list ``file``), checked before
+    anything is printed."""
     if png is None:
         return
     if scene is None:
@@ -75,7 +77,7 @@ def check_grasps_png(png: Path | None, scene: Path | None, best: int) -> None:
                                         "by their SHA-256: give --scene SCENE too")
     if not 1 <= best <= MAX_BEST:
         raise InputError(None, "--best", f"expected 1 to {MAX_BEST} grasps to draw, found {best}")
-    _output_file(png, "--png")
+    _output_file(png, "--png", (file, *scene_inputs(scene)))
 
 
 def run_grasps_png(file: Path, best: int, scene: Path, cache_dir: Path, png: Path) -> Path:

@@ -23,6 +23,7 @@ from time import perf_counter
 import numpy as np
 from scipy.spatial import ConvexHull
 
+from regrasp_cli.artefacts import Builder, QuietBuilder, rebuild_notice
 from regrasp_cli.config import InhandSpec, ObstacleSpec, load_inhand_spec
 from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp
 from regrasp_cli.dexterous.gsn import GsConfig, GsOptions, GsScratch
@@ -134,6 +135,25 @@ def _check_size(problem: InhandProblem, s: GsScratch) -> None:
                          f"{problem.hand} hand's fingertips can open ({span:.3f} m apart at most)")
 
 
+def _check_reach(problem: InhandProblem, s: GsScratch) -> None:
+    """The object must be where the fingertips reach, at its start and at its goal: some
+    fingertip workspace sample (G) within ``rho`` (the object's radius about its mass
+    centre) and the fingertip's radius of that centre.
+    The goal's position is the start's when the scene gives none, so the start is
+    blamed for both then."""
+    spec = problem.spec
+    tips = np.concatenate([w.samples for w in s.workspaces])
+    centre_O, reach = s.sampled.mass_centre, s.rho + float(np.max(s.hand.radii))
+    for field, X_GO in (("object_start", spec.X_GO_start), ("object_goal", spec.X_GO_goal)):
+        c = X_GO[:3, :3] @ centre_O + X_GO[:3, 3]
+        gap = float(np.linalg.norm(tips - c, axis=1).min()) - reach
+        if gap > 0:
+            own = field == "object_start" or not np.allclose(X_GO[:3, 3], spec.X_GO_start[:3, 3])
+            raise InputError(spec.file, field if own else "object_start",
+                             f"the object's centre at [{', '.join(f'{v:.3g}' for v in c)}] m (grasp frame) is "
+                             f"{gap:.3g} m beyond the reach of every fingertip of the {problem.hand} hand")
+
+
 def given_start(problem: InhandProblem, s: GsScratch, rng: np.random.Generator) -> GsConfig:
     """The scene's start grasp: each finger's contact the surface point nearest the one
     given, the fingers by IK; InputError when it cannot be, or is not force closure."""
@@ -160,15 +180,16 @@ def given_start(problem: InhandProblem, s: GsScratch, rng: np.random.Generator) 
 
 
 def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int,
-                progress: Callable[[int, int], None] | None = None) -> InhandOutcome:
+                progress: Callable[[int, int], None] | None = None, builder: Builder | None = None) -> InhandOutcome:
     """Plan the reorientation; the outcome's pieces bring the object to the goal pose, or
     its failure names the stage.  ``progress(done, budget)`` is called after each
-    single-query expansion."""
+    single-query expansion; ``builder`` is told why a cached roadmap is learned again."""
     spec, o = problem.spec, problem.spec.planning
     rng = np.random.default_rng(seed)
     t0 = perf_counter()
     s = scratch(problem, cache_dir, rng)
     _check_size(problem, s)
+    _check_reach(problem, s)
     options = RoadmapOptions(step_rad=o.step_rad, nodes=o.nodes)
     out = InhandOutcome(X_WG=s.X_WG)
     stages = {"setup": perf_counter() - t0}
@@ -182,7 +203,7 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int,
                                                    f"{options.start_samples} samples")
         return _finish(out, s, stages, t0)
     if o.mode == "multi-query":
-        return _plan_multi_query(problem, s, cache_dir, start, goal, rng, options, out, stages, t0)
+        return _plan_multi_query(problem, s, cache_dir, start, goal, rng, options, out, stages, t0, builder)
     t = perf_counter()
     pieces, iterations, kept = None, 0, 0
     tick = None if progress is None else _ticker(progress, options.nodes)
@@ -235,11 +256,11 @@ def _smoothed(problem: InhandProblem, s: GsScratch, pieces: list[Piece], rng: np
 
 def _plan_multi_query(problem: InhandProblem, s: GsScratch, cache_dir: Path | None, start: GsConfig,
                       goal: GsConfig, rng: np.random.Generator, options: RoadmapOptions, out: InhandOutcome,
-                      stages: dict, t0: float) -> InhandOutcome:
+                      stages: dict, t0: float, builder: Builder | None) -> InhandOutcome:
     """§V's multi-query version: the learned roadmap (built first when missing), the start
     and goal grasps joined to it, the path over it."""
     t = perf_counter()
-    rm, _, built = inhand_roadmap(problem, cache_dir)
+    rm, _, built = inhand_roadmap(problem, cache_dir, builder=builder)
     stages["roadmap learning" if built else "roadmap loading"] = perf_counter() - t
     t = perf_counter()
     gait = GaitOptions(gait_m=problem.spec.planning.gait_m)
@@ -279,11 +300,13 @@ def roadmap_path(cache_dir: Path, problem: InhandProblem, prov: Provenance) -> P
 
 
 def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions = LearnOptions(),
-                   progress=None) -> tuple[GsRoadmap, LearnStats | None, bool]:
+                   progress=None, builder: Builder | None = None) -> tuple[GsRoadmap, LearnStats | None, bool]:
     """The learned roadmap for the problem's hand, object and placement: read from the
     cache when fresh, else learned (seeded by the options, not the query) and written;
-    (roadmap, the learning's counts when it ran, whether it was built).  A roadmap of a
-    single node is an error: no grasp at a random orientation joined it."""
+    (roadmap, the learning's counts when it ran, whether it was built).  A stale or
+    damaged file is learned again, never used, and ``builder`` told why, as for a scene's
+    artefacts (:mod:`regrasp_cli.artefacts`).  A roadmap of a single node is an error: no
+    grasp at a random orientation joined it."""
     spec = problem.spec
     r = replace(RoadmapOptions(), step_rad=spec.planning.step_rad)
     g = GaitOptions(gait_m=spec.planning.gait_m)
@@ -292,10 +315,10 @@ def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptio
     if path is not None:
         with artefact_lock(path):
             if path.is_file():
-                try:  # read once: a stale or damaged file is learned again, never used
+                try:  # read once: the freshness check is the read itself
                     return from_arrays(read_artefact(path, prov, "regrasp inhand roadmap").data), None, False
-                except StaleArtefactError:
-                    pass
+                except StaleArtefactError as exc:
+                    (builder or QuietBuilder()).notice(rebuild_notice(path, exc))
             rm, st = _learn(problem, cache_dir, o, r, g, progress)
             write_artefact(path, prov, to_arrays(rm), attrs={"roots": st.roots, "joined": st.joined})
             return rm, st, True

@@ -28,9 +28,10 @@ import numpy as np
 import trimesh
 from trimesh import creation
 
-from regrasp_cli.errors import InputError
+from regrasp_cli.errors import InputError, shown
 
 BUILTIN_PREFIX = "builtin:"
+MIN_EXTENT, MAX_EXTENT = 1e-3, 100.0  # m: the largest side of a mesh's bounding box, scaled
 
 
 # --------------------------------------------------------------------------- built-ins
@@ -252,13 +253,13 @@ def load_object_mesh(
     except (TypeError, ValueError):
         scale_ok = False
     if not scale_ok:
-        raise InputError(file, _sibling_field(field, "scale"), f"scale must be a finite number > 0, got {scale!r}")
+        raise InputError(file, _sibling_field(field, "scale"), f"scale must be a finite number > 0, got {shown(scale)}")
 
     if spec.startswith(BUILTIN_PREFIX):
         key = spec[len(BUILTIN_PREFIX):]
         if key not in _BUILTINS:
             valid = ", ".join(BUILTIN_PREFIX + n for n in builtin_names())
-            raise InputError(file, field, f"unknown built-in object {spec!r}; valid: {valid}")
+            raise InputError(file, field, f"unknown built-in object {shown(spec)}; valid: {valid}")
         name, where, mesh = spec, spec, make_builtin(key)
     else:
         path = Path(base_dir) / spec
@@ -284,6 +285,11 @@ def load_object_mesh(
     mesh = mesh.copy()
     if scale != 1.0:
         mesh.apply_scale(float(scale))
+    size = float(mesh.extents.max())
+    if not MIN_EXTENT <= size <= MAX_EXTENT:
+        raise InputError(file, _sibling_field(field, "scale"), f"mesh {where} scaled by {scale:g} is {size:.3g} m "
+                                                               f"across; expected {MIN_EXTENT:g} to {MAX_EXTENT:g} m "
+                                                               "(is the scale right for the mesh's units?)")
     n_shells = int(mesh.body_count)
     watertight = bool(mesh.is_watertight and mesh.is_winding_consistent)
     if not watertight:

@@ -28,7 +28,7 @@ import pinocchio as pin
 import trimesh
 
 from regrasp_cli.config import HandSpec, RobotSpec, load_robot_spec
-from regrasp_cli.errors import InputError
+from regrasp_cli.errors import InputError, shown
 from regrasp_cli.spatial import pose_matrix
 from regrasp_cli.store import sha256_file, sha256_params
 
@@ -90,6 +90,9 @@ class Robot:
             raise InputError(spec.file, "urdf", f"cannot parse URDF {spec.urdf}: {first}") from None
         self.model: pin.Model = model
         _collision_from_visual(spec, model, collision, visual)
+        if not collision.ngeoms:
+            raise InputError(spec.file, "urdf", f"{spec.urdf} has no <collision> geometry in any link; expected "
+                                                "collision geometry (or `collision_from_visual: [LINK, ...]` here)")
         if spec.convex_hulls:
             _convexify(collision)
         self.collision_model: pin.GeometryModel = collision
@@ -126,8 +129,7 @@ class Robot:
         # URDF mimic joints: follower index -> (leader index, multiplier, offset); the
         # follower's own value in q is ignored by the kinematics (:meth:`to_pin`)
         self.mimic: dict[int, tuple[int, float, float]] = {
-            names.index(f): (names.index(l), m, o) for f, (l, m, o) in _mimic_joints(spec).items()
-            if f in names and l in names}
+            names.index(f): (names.index(l), m, o) for f, (l, m, o) in _checked_mimic(spec, names).items()}
         self._mimic = np.array([(f, l) for f, (l, _, _) in self.mimic.items()], dtype=int).reshape(-1, 2)
         self._mimic_mo = np.array([(m, o) for _, m, o in self.mimic.values()], dtype=float).reshape(-1, 2)
         self.groups: dict[str, np.ndarray] = {
@@ -145,7 +147,7 @@ class Robot:
         try:
             return self.joint_names.index(name)
         except ValueError:
-            raise InputError(self.spec.file, field, f"unknown joint {name!r} (not an actuated joint of "
+            raise InputError(self.spec.file, field, f"unknown joint {shown(name)} (not an actuated joint of "
                                                     f"{self.spec.urdf.name})") from None
 
     def _indices(self, names, field: str) -> np.ndarray:
@@ -153,7 +155,7 @@ class Robot:
 
     def frame_id(self, name: str, field: str = "link") -> int:
         if not self.model.existFrame(name):
-            raise InputError(self.spec.file, field, f"unknown link or frame {name!r} in {self.spec.urdf.name}")
+            raise InputError(self.spec.file, field, f"unknown link or frame {shown(name)} in {self.spec.urdf.name}")
         if self.model.existFrame(name, pin.FrameType.BODY):  # a link named like a joint: the link
             return self.model.getFrameId(name, pin.FrameType.BODY)
         return self.model.getFrameId(name)
@@ -305,7 +307,7 @@ def _collision_from_visual(spec: RobotSpec, model: pin.Model, collision: pin.Geo
     reach 11 mm past the link, to the fingertip's centre, and stick out of the tip)."""
     for link in spec.collision_from_visual:
         if not model.existFrame(link) or model.frames[model.getFrameId(link)].type != pin.FrameType.BODY:
-            raise InputError(spec.file, "collision_from_visual", f"expected links of {spec.urdf.name}, found {link!r}")
+            raise InputError(spec.file, "collision_from_visual", f"expected links of {spec.urdf.name}, found {shown(link)}")
         fid = model.getFrameId(link)
         shapes = [go for go in visual.geometryObjects if go.parentFrame == fid]
         if not shapes:
@@ -347,6 +349,30 @@ def _mimic_joints(spec: RobotSpec) -> dict[str, tuple[str, float, float]]:
             except ValueError:
                 raise InputError(spec.urdf, f"joint {j.get('name')}.mimic",
                                  "expected numbers for multiplier and offset") from None
+    return out
+
+
+def _checked_mimic(spec: RobotSpec, names: list[str]) -> dict[str, tuple[str, float, float]]:
+    """:func:`_mimic_joints` between joints of the model: a mimic naming a joint the URDF
+    does not have is said in a warning (the follower then moves as a joint of its own);
+    a cycle of mimics (a joint following itself through others) is refused."""
+    import warnings
+
+    found = _mimic_joints(spec)
+    for f, (leader, _, _) in found.items():
+        if f in names and leader not in names:
+            warnings.warn(f"{spec.urdf}: joint {f}.mimic names joint {shown(leader)}, which the URDF has not (or "
+                          f"not as a moving joint); {f} moves as a joint of its own")
+    out = {f: v for f, v in found.items() if f in names and v[0] in names}
+    for f in out:
+        seen, j = [f], out[f][0]
+        while j in out:
+            if j in seen:
+                cycle = " -> ".join(seen[seen.index(j):] + [j])
+                raise InputError(spec.urdf, f"joint {j}.mimic", f"the mimic joints form a cycle ({cycle}); expected "
+                                                                 f"each follower to end at a joint that follows none")
+            seen.append(j)
+            j = out[j][0]
     return out
 
 

@@ -50,7 +50,7 @@ def test_seeds_as_a_list_and_defaults(tmp_path):
     ({"planners": ["prm"]}, "planners", "unknown planner 'prm'"),
     ({"planners": ["roadmap", "roadmap"]}, "planners", "twice"),
     ({"planners": []}, "planners", "at least one"),
-    ({"seeds": 0}, "seeds", ">= 1"),
+    ({"seeds": 0}, "seeds", "from 1 to"),
     ({"seeds": [1, -2]}, "seeds", "integers >= 0"),
     ({"seeds": [1, 1]}, "seeds", "twice"),
     ({"budget_s": 0}, "budget_s", "> 0"),

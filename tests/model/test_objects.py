@@ -109,8 +109,8 @@ def test_file_round_trip(tmp_path, ext):
     assert obj.name == f"statuette.{ext}" and obj.source == f"statuette.{ext}"
     assert obj.n_triangles == len(src.faces)
     assert np.allclose(obj.extents, src.extents, atol=1e-6)
-    milli = load_object_mesh(f"statuette.{ext}", base_dir=tmp_path, scale=1e-3)
-    assert np.allclose(milli.extents, 1e-3 * obj.extents)
+    centi = load_object_mesh(f"statuette.{ext}", base_dir=tmp_path, scale=1e-2)  # 2.2 mm: objects.MIN_EXTENT is 1
+    assert np.allclose(centi.extents, 1e-2 * obj.extents)
 
 
 def test_scene_is_flattened(tmp_path):
