@@ -32,6 +32,11 @@ HAND_SIDES = ("right", "left")
 # force-closure, so a larger value is a typo, not a material
 MAX_FRICTION = 5.0
 ARM_OF_HAND = {"right": "right_arm", "left": "left_arm"}
+MAX_LENGTH = 1000.0  # m: positions and sizes in a scene (coal's bounding volumes overflow near 1e308)
+# budgets a file may ask for: past these a run would last days, not a typo's worth
+MAX_SAMPLES = 100_000  # self_collision.samples (3000: about 10 s)
+MAX_NODES = 1_000_000  # in-hand planning.nodes (6000: a failed run of 60-110 s)
+MAX_RESTARTS = 1000  # planning.ik_restarts
 #: PyYAML's safe loader, in C where libyaml is present (a robot.yaml reads in a tenth of the time)
 SAFE_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
@@ -129,14 +134,16 @@ class Fields:
             raise self.error(key, f"expected true or false, found {_kind(v)}")
         return v
 
-    def int(self, key: str, default: Any = ..., minimum: int | None = None) -> int:
+    def int(self, key: str, default: Any = ..., minimum: int | None = None, maximum: int | None = None) -> int:
         if default is not ... and key not in self.data:
             return default
         v = self.raw(key)
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.error(key, f"expected an integer, found {_kind(v)}")
         if minimum is not None and v < minimum:
-            raise self.error(key, f"expected an integer >= {minimum}, found {v}")
+            raise self.error(key, f"expected an integer >= {minimum}, found {shown(v)}")
+        if maximum is not None and v > maximum:
+            raise self.error(key, f"expected an integer <= {maximum:,}, found {shown(v)}")
         return v
 
     def float(self, key: str, default: Any = ..., positive: bool = False, maximum: float | None = None) -> float:
@@ -153,8 +160,9 @@ class Fields:
             raise self.error(key, f"expected a number <= {maximum:g}, found {v:g}")
         return float(v)
 
-    def vector(self, key: str, n: int | None = None, positive: bool = False) -> tuple[float, ...]:
-        return as_vector(self.file, self.path(key), self.raw(key), n, positive)
+    def vector(self, key: str, n: int | None = None, positive: bool = False,
+               bound: float | None = None) -> tuple[float, ...]:
+        return as_vector(self.file, self.path(key), self.raw(key), n, positive, bound)
 
     def names(self, key: str, default: Any = ...) -> tuple[str, ...]:
         if default is not ... and key not in self.data:
@@ -165,7 +173,9 @@ class Fields:
         return tuple(v)
 
 
-def as_vector(file, where: str, v: Any, n: int | None = None, positive: bool = False) -> tuple[float, ...]:
+def as_vector(file, where: str, v: Any, n: int | None = None, positive: bool = False,
+              bound: float | None = None) -> tuple[float, ...]:
+    """A list of (``n``) finite numbers (> 0 with ``positive``, within +-``bound``)."""
     ok = isinstance(v, list) and all(
         isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v
     )
@@ -174,6 +184,8 @@ def as_vector(file, where: str, v: Any, n: int | None = None, positive: bool = F
         raise InputError(file, where, f"expected {shape}, found {shown(v)}")
     if positive and any(x <= 0 for x in v):
         raise InputError(file, where, f"expected numbers > 0, found {shown(v)}")
+    if bound is not None and any(abs(x) > bound for x in v):
+        raise InputError(file, where, f"expected numbers within +-{bound:g}, found {shown(v)}")
     return tuple(float(x) for x in v)
 
 
@@ -181,7 +193,7 @@ def parse_pose(fields: Fields, key: str) -> np.ndarray:
     """``{xyz: [x,y,z], rpy: [r,p,y]}`` or ``{xyz, quat: [x,y,z,w]}`` -> 4x4 (m, rad)."""
     f = fields.sub(key)
     f.only("xyz", "rpy", "quat")
-    xyz = f.vector("xyz", 3)
+    xyz = f.vector("xyz", 3, bound=MAX_LENGTH)
     if f.has("rpy") and f.has("quat"):
         raise f.error("quat", "give either rpy or quat, not both")
     if f.has("quat"):
@@ -195,19 +207,25 @@ def parse_pose(fields: Fields, key: str) -> np.ndarray:
 
 
 def resolve_path(file: Path, where: str, value: str, must_exist: bool = True) -> Path:
-    """A path relative to the directory of ``file``; ``package://`` URIs pass through."""
+    """A path relative to the directory of ``file``; ``package://`` URIs pass through.
+    With ``must_exist``, it must name a regular file (a FIFO would block its reader, a
+    device never end)."""
     if value.startswith("package://"):
         return Path(value)
     p = Path(value)
     p = p if p.is_absolute() else (file.parent / p)
-    if must_exist and not p.exists():
+    try:
+        exists = p.exists()
+    except OSError as exc:  # a name too long, a loop of links
+        raise InputError(file, where, f"cannot use the path {shown(str(p))}: {exc.strerror or exc}") from None
+    if must_exist and not exists:
         raise InputError(file, where, f"no such file: {p}")
     if must_exist:
         try:
             regular_file(p)
-        except InputError as exc:  # a FIFO would block the reader, a device never end
+        except InputError as exc:
             raise InputError(file, where, f"{p} {exc.message}") from None
-    return p.resolve() if p.exists() else p
+    return p.resolve() if exists else p
 
 
 # --------------------------------------------------------------------------- robot.yaml
@@ -364,7 +382,8 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     if f.has("self_collision"):
         s = f.sub("self_collision")
         s.only("samples", "seed", "never_margin")
-        sc = SelfCollisionOptions(samples=s.int("samples", sc.samples, minimum=1), seed=s.int("seed", sc.seed),
+        sc = SelfCollisionOptions(samples=s.int("samples", sc.samples, minimum=1, maximum=MAX_SAMPLES),
+                                  seed=s.int("seed", sc.seed),
                                   never_margin=s.float("never_margin", sc.never_margin))
 
     srdf, srdf_pairs = None, ()
@@ -512,7 +531,7 @@ def load_scene_spec(path: str | Path) -> SceneSpec:
             seed=p.int("seed", planning.seed, minimum=0),
             segment_resolution=p.float("segment_resolution", planning.segment_resolution, positive=True),
             contact_tolerance=p.float("contact_tolerance", planning.contact_tolerance, positive=True),
-            ik_restarts=p.int("ik_restarts", planning.ik_restarts, minimum=1),
+            ik_restarts=p.int("ik_restarts", planning.ik_restarts, minimum=1, maximum=MAX_RESTARTS),
         )
     return SceneSpec(file, robot, obj, obstacles, task, planning, _supports(f, obstacles))
 
@@ -578,13 +597,14 @@ def _obstacle(f: Fields) -> ObstacleSpec:
     mesh = None
     if shape == "box":
         g.only("size")
-        size = g.vector("size", 3, positive=True)
+        size = g.vector("size", 3, positive=True, bound=MAX_LENGTH)
     elif shape == "cylinder":
         g.only("radius", "length")
-        size = (g.float("radius", positive=True), g.float("length", positive=True))
+        size = (g.float("radius", positive=True, maximum=MAX_LENGTH),
+                g.float("length", positive=True, maximum=MAX_LENGTH))
     elif shape == "sphere":
         g.only("radius")
-        size = (g.float("radius", positive=True),)
+        size = (g.float("radius", positive=True, maximum=MAX_LENGTH),)
     else:
         g.only("file", "scale")
         mesh = resolve_path(f.file, g.path("file"), g.str("file"))
@@ -688,7 +708,8 @@ def load_inhand_spec(path: str | Path) -> InhandSpec:
         mode = p.str("mode", planning.mode)
         if mode not in INHAND_MODES:
             raise p.error("mode", f"expected one of {', '.join(INHAND_MODES)}, found {shown(mode)}")
-        planning = InhandPlanning(p.int("seed", planning.seed, minimum=0), p.int("nodes", planning.nodes, minimum=1),
+        planning = InhandPlanning(p.int("seed", planning.seed, minimum=0),
+                                  p.int("nodes", planning.nodes, minimum=1, maximum=MAX_NODES),
                                   p.float("step_rad", planning.step_rad, positive=True, maximum=3.2),
                                   p.float("gait_m", planning.gait_m, positive=True),
                                   p.bool("smooth", planning.smooth), mode)

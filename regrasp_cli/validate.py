@@ -576,9 +576,12 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         dts.append(perf_counter() - t0)
     job = {"plan": plan, "inputs": inputs, "carries": carries, "reach": reach, "resolution": resolution,
            "cartesian_step": cartesian_step}
-    # longest phases first, so that two workers finish together
-    order = sorted(range(len(plan.phases)), key=lambda k: -len(plan.phases[k].waypoints))
+    # longest phases first, so that two workers finish together; a phase outside the joint
+    # limits is not sampled (its segments may be any length: 1e6 rad at 0.01 is 1e8 samples)
+    inside = [k for k in range(len(plan.phases)) if not any(i.check == "limits" for i in per_phase[k])]
+    order = sorted(inside, key=lambda k: -len(plan.phases[k].waypoints))
     results = dict(zip(order, ordered_map(_phase_collisions, order, jobs, job)))
+    results.update({k: ([], 0, 0.0) for k in range(len(plan.phases)) if k not in results})
     summaries, seconds = [], {}
     for k, phase in enumerate(plan.phases):
         found, n, dt = results[k]

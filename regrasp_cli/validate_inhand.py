@@ -229,9 +229,10 @@ def validate_inhand(plan: Plan, path: Path, inputs: Inputs, resolution: float, d
         previous = plan.phases[k - 1] if k else None
         found = continuity_issues(phase, previous, ch.robot.joint_names)
         found += phase_timing_issues(phase, previous, inputs.velocity, inputs.acceleration, dt, ch.robot.joint_names)
-        found += limit_issues(phase, ch.robot.joint_names, inputs.lower, inputs.upper)
-        found += ch.phase_issues(phase, previous)
-        hits, n = ch.collisions(phase, resolution) if phase.object_poses is not None else ([], 0)
+        limits = limit_issues(phase, ch.robot.joint_names, inputs.lower, inputs.upper)
+        found += limits + ch.phase_issues(phase, previous)
+        # outside the limits, a segment may be any length: its samples are not drawn
+        hits, n = ch.collisions(phase, resolution) if phase.object_poses is not None and not limits else ([], 0)
         issues += found + hits
         dt = perf_counter() - t0
         seconds[phase.name] = seconds.get(phase.name, 0.0) + dt

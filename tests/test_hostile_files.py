@@ -139,6 +139,14 @@ def test_a_yaml_alias_bomb_in_robot_rest_is_refused_at_once(tmp_path):
     _one_line(p, "robot.yaml", "aliases")
 
 
+def test_a_yaml_alias_bomb_in_a_suites_seeds_is_refused_at_once(tmp_path):
+    suite = {"format": "regrasp.bench/1", "name": "bomb", "scenes": [str(SCENE_YAML)], "seeds": "BOMB"}
+    path = tmp_path / "suite.yaml"
+    path.write_text(yaml.safe_dump(suite, sort_keys=False).replace("BOMB", _bomb()))
+    _one_line(_cli("bench", path, "-o", tmp_path / "out"), str(path), "aliases")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_recursive_yaml_document_is_refused_by_the_count():
     from regrasp_cli.errors import InputError
     from regrasp_cli.inputs import check_expansion
@@ -232,6 +240,26 @@ def test_an_object_scaled_to_nanometres_is_one_line(tmp_path):
     assert_one_error_line(run("--cache-dir", tmp_path / "cache", "plan", scene, "-o", tmp_path / "p.json"),
                           str(scene), "object.scale", "m across")
     assert not (tmp_path / "p.json").exists()
+
+
+def test_an_obstacle_at_1e308_is_one_line(tmp_path):
+    """Found by tests/test_fuzz_inputs.py: coal refused the bounding volume with a traceback."""
+    d = scene_dict()
+    d["obstacles"][0]["pose"]["xyz"][1] = -1e308
+    scene = write_scene(tmp_path / "scene.yaml", d)
+    assert_one_error_line(run("info", scene), str(scene), "obstacles[0].pose.xyz", "within +-1000")
+
+
+def test_a_waypoint_1e6_rad_away_is_a_limits_issue_not_1e8_samples(default_plan, tmp_path):
+    """Found by tests/test_fuzz_inputs.py: the collision samples of a 1e6 rad segment did
+    not fit in memory; a phase outside the joint limits is not sampled."""
+    d = json.loads(default_plan.read_text())
+    d["phases"][0]["waypoints"][1][5] = 1e6
+    plan = default_plan.parent / "far-waypoint.json"  # beside it: the files it names are relative
+    plan.write_text(json.dumps(d))
+    p = _cli("validate", plan)
+    assert p.returncode == 1 and "Traceback" not in p.stderr, p.stderr[-2000:]
+    assert "limits" in p.stdout and "1e+06 outside" in p.stdout, p.stdout[-2000:]
 
 
 # ------------------------------------------------------------------ messages

@@ -180,19 +180,21 @@ def test_a_damaged_roadmap_is_learned_again_with_a_line_saying_why(tmp_path, cac
 # ------------------------------------------------------------------ the object out of the fingertips' reach
 
 
-@pytest.mark.parametrize("goal_xyz, field", [(None, "object_start"), ([0.0, 0.0, 0.0], "object_start")])
-def test_an_object_start_1000_km_away_is_blamed_on_object_start(tmp_path, cache_dir, goal_xyz, field):
-    """The goal inherits the start's position when it gives none: the start is at fault
-    either way, not the goal the planner would try first."""
+@pytest.mark.parametrize("x, goal_xyz, words", [
+    (1.0e6, None, (": object_start.xyz: ", "within +-1000")),  # 1000 km: refused as a position
+    (10.0, None, (": object_start: ", "beyond the reach")),  # the goal inherits the start's position
+    (10.0, [0.0, 0.0, 0.0], (": object_start: ", "beyond the reach"))])
+def test_an_object_start_out_of_reach_is_blamed_on_object_start(tmp_path, cache_dir, x, goal_xyz, words):
+    """Not on the goal, which the planner tried first."""
     import yaml
 
     d = yaml.safe_load(SCENE.read_text())
     d["robot"] = "builtin:hand4"
-    d["object_start"] = {"xyz": [1.0e6, 0.0, 0.0]}
+    d["object_start"] = {"xyz": [x, 0.0, 0.0]}
     if goal_xyz is not None:
         d["object_goal"] = dict(d["object_goal"], xyz=goal_xyz)
     scene = tmp_path / "scene.yaml"
     scene.write_text(yaml.safe_dump(d))
     result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "plan.json")
-    assert_one_error_line(result, str(scene), f": {field}: ", "beyond the reach")
+    assert_one_error_line(result, str(scene), *words)
     assert not (tmp_path / "plan.json").exists()

@@ -123,6 +123,8 @@ def seeds_of(file: Path | None, field: str, value) -> tuple[int, ...]:
                                                   for s in value):
         if len(set(value)) != len(value):
             raise InputError(file, field, "a seed is listed twice")
+        if len(value) > MAX_SEEDS:
+            raise InputError(file, field, f"expected at most {MAX_SEEDS:,} seeds, found {len(value):,}")
         return tuple(value)
     raise InputError(file, field, f"expected a count >= 1 or a non-empty list of integers >= 0, found {shown(value)}")
 
