@@ -214,13 +214,16 @@ def test_a_timing_grid_of_1e7_seconds_is_refused_before_sampling(default_plan, t
 
 
 def test_a_quaternion_whose_norm_overflows_is_normalised(tmp_path):
-    from regrasp_cli.config import load_scene_spec
+    from regrasp_cli.config import load_inhand_spec, load_scene_spec
 
     d = scene_dict()
     d["task"]["object_goal"] = {"xyz": [0.62, 0.78, 0.74], "quat": [1e308, 1e308, 0.0, 0.0]}
-    spec = load_scene_spec(write_scene(tmp_path / "scene.yaml", d))
-    R = spec.task.X_WO_goal[:3, :3]
-    assert abs(R[0, 1] - 1.0) < 1e-12 and abs(R[2, 2] + 1.0) < 1e-12  # a half turn about (1, 1, 0)
+    inhand = yaml.safe_load((ROOT / "regrasp_cli/data/scenes/inhand_ball.yaml").read_text())
+    inhand["object_goal"] = {"quat": [1e308, 1e308, 0.0, 0.0]}
+    for X in (load_scene_spec(write_scene(tmp_path / "scene.yaml", d)).task.X_WO_goal,
+              load_inhand_spec(write_scene(tmp_path / "inhand.yaml", inhand)).X_GO_goal):
+        R = X[:3, :3]
+        assert abs(R[0, 1] - 1.0) < 1e-12 and abs(R[2, 2] + 1.0) < 1e-12  # a half turn about (1, 1, 0)
 
 
 def test_a_urdf_without_collision_geometry_is_one_line(tmp_path):
