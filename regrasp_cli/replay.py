@@ -28,7 +28,7 @@ from regrasp_cli.model.objects import load_object_mesh
 from regrasp_cli.model.robot import Kinematics, Robot, load_robot
 from regrasp_cli.spatial import inverse
 from regrasp_cli.store import sha256_file
-from regrasp_cli.trajectory import Plan
+from regrasp_cli.trajectory import MAX_MAGNITUDE, Plan
 
 JOINT_TOL = 1e-9  # rad or m: limits of the plan against the URDF's
 
@@ -74,8 +74,8 @@ def _array(file: Path, v: Any, where: str, shape: tuple[int, ...]) -> np.ndarray
         a = np.asarray(v, dtype=float)
     except (TypeError, ValueError):
         a = None
-    if a is None or a.shape != shape or not np.all(np.isfinite(a)):
-        raise InputError(file, where, f"expected finite numbers of shape {shape}")
+    if a is None or a.shape != shape or not np.all(np.isfinite(a)) or np.abs(a).max(initial=0.0) > MAX_MAGNITUDE:
+        raise InputError(file, where, f"expected finite numbers within +-{MAX_MAGNITUDE:g} of shape {shape}")
     return a
 
 

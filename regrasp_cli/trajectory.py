@@ -51,6 +51,7 @@ FORMAT = "regrasp.plan/2"
 OLD_FORMATS = ("regrasp.plan/1",)
 MAX_PHASE_S = 3600.0  # s: longer phases are refused: the validator's and viewer's samples would not fit in memory
 MAX_PLAN_S = 86400.0  # s: times past this are refused, for the same reason
+MAX_MAGNITUDE = 1e9  # any number of a plan: the squares and cross products of the checks stay finite
 
 
 @dataclass(frozen=True)
@@ -235,6 +236,8 @@ class _Reader:
             raise self.error(where, f"expected shape {tuple('n' if s is None else s for s in shape)}, found {a.shape}")
         if not np.all(np.isfinite(a)):
             raise self.error(where, "expected finite numbers")
+        if a.size and np.abs(a).max() > MAX_MAGNITUDE:
+            raise self.error(where, f"expected numbers within +-{MAX_MAGNITUDE:g}")
         return a
 
 

@@ -313,12 +313,13 @@ def test_unreachable_object_fails_at_grasps(solved, cache_dir, tmp_path):
     m = re.fullmatch(r"error: planning failed at stage 'grasps': (.+)", lines[0])
     assert m, lines[0]
     reason = m.group(1)
-    # every style says why: no hand reaches the statuette at its start pose
+    # every style says where and why: no hand reaches the statuette at its start pose
     # at once, from the grasps usable at each end (no configuration searched)
-    assert reason.startswith("one-arm: no hand can hold the object at both the start and the goal with one grasp")
+    assert reason.startswith("one-arm (stage grasps): no hand can hold the object at both the start and the goal "
+                             "with one grasp")
     assert "right hand 0 at the start" in reason and "left hand 0 at the start" in reason
-    assert "handover: no hand can hold the object at its start pose" in reason
-    assert "place-regrasp: no hand can hold the object at its start pose" in reason
+    assert "handover (stage grasps): no hand can hold the object at its start pose" in reason
+    assert "place-regrasp (stage grasps): no hand can hold the object at its start pose" in reason
     d = json.loads(out.read_text())
     assert (d["format"], d["status"]) == ("regrasp.plan/2", "failed")
     assert d["failure"] == {"stage": "grasps", "transition": None, "reason": reason}

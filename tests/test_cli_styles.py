@@ -112,8 +112,8 @@ def test_a_forced_style_that_cannot_work_fails_with_its_reason(cache, tmp_path):
 
 def test_the_unreachable_scene_fails_at_once_for_every_style(cache, tmp_path):
     result, plan = _plan(cache, SCENES / "hironx_unreachable.yaml", tmp_path / "plan.json")
-    line = assert_one_error_line(result, "stage 'grasps'", "one-arm:", "handover:", "place-regrasp:", "goal",
-                                 exit_code=1)
+    line = assert_one_error_line(result, "stage 'grasps'", "one-arm (stage grasps):", "handover (stage grasps):",
+                                 "place-regrasp (stage grasps):", "goal", exit_code=1)
     assert "no hand can hold the object at its goal pose" in line
     assert plan["failure"]["stage"] == "grasps"
     assert plan["stats"]["counts"]["single_checks"] == 0  # ruled out before any configuration is searched

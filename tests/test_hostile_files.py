@@ -265,6 +265,15 @@ def test_a_waypoint_1e6_rad_away_is_a_limits_issue_not_1e8_samples(default_plan,
     assert "limits" in p.stdout and "1e+06 outside" in p.stdout, p.stdout[-2000:]
 
 
+def test_a_grasp_contact_at_1e308_is_one_line(default_plan):
+    """Found by the fuzz (seed 11): the force-closure test's wrenches overflowed."""
+    d = json.loads(default_plan.read_text())
+    d["grasps"][0]["contacts"][0]["point"][0] = -1e308
+    plan = default_plan.parent / "far-contact.json"
+    plan.write_text(json.dumps(d))
+    assert_one_error_line(run("validate", plan), str(plan), "grasps[0].contacts[0]", "within")
+
+
 # ------------------------------------------------------------------ messages
 
 

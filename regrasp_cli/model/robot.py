@@ -126,16 +126,33 @@ class Robot:
 
         self.prismatic = np.array([model.joints[j].shortname().startswith("JointModelP")
                                    for j in range(1, model.njoints)], dtype=bool)
-        # URDF mimic joints: follower index -> (leader index, multiplier, offset); the
-        # follower's own value in q is ignored by the kinematics (:meth:`to_pin`)
+        # URDF mimic joints: follower index -> (leader index, multiplier, offset), a chain of
+        # followers composed down to the joint that follows none; the leader's limits bind
         self.mimic: dict[int, tuple[int, float, float]] = {
             names.index(f): (names.index(l), m, o) for f, (l, m, o) in _checked_mimic(spec, names).items()}
+        self._bind_follower_limits()
         self._mimic = np.array([(f, l) for f, (l, _, _) in self.mimic.items()], dtype=int).reshape(-1, 2)
         self._mimic_mo = np.array([(m, o) for _, m, o in self.mimic.values()], dtype=float).reshape(-1, 2)
         self.groups: dict[str, np.ndarray] = {
             g: self._indices(spec.groups[g], f"groups.{g}") for g in GROUP_NAMES}
         self.hands: dict[str, Hand] = {s: self._hand(h) for s, h in spec.hands.items()}
         self.q_rest = self.coupled(self.configuration(spec.rest, "rest", base=np.clip(np.zeros(n), lo, hi)))
+
+    def _bind_follower_limits(self) -> None:
+        """A follower's limits become its leader's range mapped through the mimic: its value
+        always comes from the leader, so the leader's limits bind.  Where the URDF's own
+        limits of the follower cut that range (PR2's gripper joints of multiplier -1 and
+        limits [0, 0.548] are outside them at every leader value but 0), a warning says so
+        at load, and the planner and the validator both use the mapped range."""
+        import warnings
+
+        for f, (lead, m, o) in self.mimic.items():
+            a, b = sorted((m * self.lower[lead] + o, m * self.upper[lead] + o))
+            if a < self.lower[f] - 1e-9 or b > self.upper[f] + 1e-9:
+                warnings.warn(f"{self.spec.urdf}: joint {self.joint_names[f]} follows {self.joint_names[lead]} "
+                              f"(mimic multiplier {m:g}, offset {o:g}) over [{a:.4g}, {b:.4g}], outside its own "
+                              f"limits [{self.lower[f]:.4g}, {self.upper[f]:.4g}]; the leader's limits bind")
+            self.lower[f], self.upper[f] = a, b
 
     # ------------------------------------------------------------------ names and indices
 
@@ -353,9 +370,10 @@ def _mimic_joints(spec: RobotSpec) -> dict[str, tuple[str, float, float]]:
 
 
 def _checked_mimic(spec: RobotSpec, names: list[str]) -> dict[str, tuple[str, float, float]]:
-    """:func:`_mimic_joints` between joints of the model: a mimic naming a joint the URDF
-    does not have is said in a warning (the follower then moves as a joint of its own);
-    a cycle of mimics (a joint following itself through others) is refused."""
+    """:func:`_mimic_joints` between joints of the model, each follower of a follower
+    composed down to the joint that follows none (q_f = m_f (m_l q_r + o_l) + o_f).  A mimic
+    naming a joint the URDF does not have is said in a warning (the follower then moves
+    as a joint of its own); a cycle of mimics (a joint following itself) is refused."""
     import warnings
 
     found = _mimic_joints(spec)
@@ -363,16 +381,20 @@ def _checked_mimic(spec: RobotSpec, names: list[str]) -> dict[str, tuple[str, fl
         if f in names and leader not in names:
             warnings.warn(f"{spec.urdf}: joint {f}.mimic names joint {shown(leader)}, which the URDF has not (or "
                           f"not as a moving joint); {f} moves as a joint of its own")
-    out = {f: v for f, v in found.items() if f in names and v[0] in names}
-    for f in out:
-        seen, j = [f], out[f][0]
-        while j in out:
-            if j in seen:
-                cycle = " -> ".join(seen[seen.index(j):] + [j])
-                raise InputError(spec.urdf, f"joint {j}.mimic", f"the mimic joints form a cycle ({cycle}); expected "
-                                                                 f"each follower to end at a joint that follows none")
-            seen.append(j)
-            j = out[j][0]
+    direct = {f: v for f, v in found.items() if f in names and v[0] in names}
+    out = {}
+    for f in direct:
+        seen, (root, m, o) = [f], direct[f]
+        while root in direct:
+            if root in seen:
+                cycle = " -> ".join(seen[seen.index(root):] + [root])
+                raise InputError(spec.urdf, f"joint {root}.mimic", f"the mimic joints form a cycle ({cycle}); "
+                                                                   "expected each follower to end at a joint that "
+                                                                   "follows none")
+            seen.append(root)
+            root, m2, o2 = direct[root][0], direct[root][1], direct[root][2]
+            m, o = m * m2, m * o2 + o
+        out[f] = (root, m, o)
     return out
 
 

@@ -14,8 +14,9 @@ added obstacles lazily, with the object's (Saut et al. 2010 §V-B), instead of a
 
 No silent emptiness: an elementary roadmap or a Super Graph without a node is an
 :class:`~regrasp_cli.errors.EmptyRoadmap` (nothing written) naming the pairs that rejected
-most samples (:mod:`.rejections`); one with fewer than a fifth of the nodes asked for, or a
-rest configuration in collision, a warning in the :class:`BuildReport`.
+most samples (:mod:`.rejections`); one with fewer nodes than asked for (saying which pairs
+rejected most samples), or a rest configuration in collision, a warning in the
+:class:`BuildReport`.
 """
 
 from __future__ import annotations
@@ -411,16 +412,15 @@ def _check_elementary(options: RoadmapOptions, roadmaps: dict[str, tuple[Roadmap
                          rest: list[tuple[str, str]]) -> list[str]:
     """Raises EmptyRoadmap when an elementary roadmap has no node, naming the pairs that
     rejected most samples (and ``rest``, the colliding pairs of the rest configuration);
-    returns a warning per roadmap with fewer than :data:`FEW` of the nodes asked for."""
+    returns a warning per roadmap with fewer nodes than asked for."""
     what = f"samples collide or come within {1000 * options.margin:g} mm"
     empty, few = [], []
     for side, (rm, tally) in roadmaps.items():
         name = f"R_{side[0]} (torso + {side} arm)"
         if len(rm.nodes) == 0:
             empty.append(f"{name} has no node: {tally.describe(what)}")
-        elif len(rm.nodes) < FEW * options.nodes:
-            few.append(f"{name} has only {len(rm.nodes)} of the {options.nodes} nodes asked for: "
-                       f"{tally.describe(what)}")
+        elif len(rm.nodes) < options.nodes:  # any shortfall is said: a user asked for the nodes
+            few.append(f"{name} has {len(rm.nodes)} of the {options.nodes} nodes asked for: {tally.describe(what)}")
     if empty:
         raise EmptyRoadmap("the roadmap is empty: " + "; ".join(empty) + _rest_note(rest))
     return few

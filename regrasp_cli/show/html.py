@@ -134,14 +134,17 @@ def _lines(points: np.ndarray, path, rgb: np.ndarray | None = None, colour: int 
 
 
 def _floor_grid(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Grid lines (2k, 3) on z = 0 covering [lo, hi] in x and y, every FLOOR_STEP."""
+    """Grid lines (2k, 3) covering [lo, hi] in x and y, every FLOOR_STEP, at z = 0 or under
+    the lowest point when it is lower (a robot whose root link is its pelvis stands on a
+    floor below W's origin)."""
+    z = min(float(lo[2]), 0.0)
     x0, x1 = np.floor(lo[0] / FLOOR_STEP - 1) * FLOOR_STEP, np.ceil(hi[0] / FLOOR_STEP + 1) * FLOOR_STEP
     y0, y1 = np.floor(lo[1] / FLOOR_STEP - 1) * FLOOR_STEP, np.ceil(hi[1] / FLOOR_STEP + 1) * FLOOR_STEP
     pts = []
     for x in np.arange(x0, x1 + 1e-9, FLOOR_STEP):
-        pts += [[x, y0, 0.0], [x, y1, 0.0]]
+        pts += [[x, y0, z], [x, y1, z]]
     for y in np.arange(y0, y1 + 1e-9, FLOOR_STEP):
-        pts += [[x0, y, 0.0], [x1, y, 0.0]]
+        pts += [[x0, y, z], [x1, y, z]]
     return np.array(pts)
 
 

@@ -109,7 +109,7 @@ def key_frame_pngs(view: PlanView, size: tuple[int, int] = (960, 720), source: s
     scenes = [frame_soup(view, soups, kf.q, kf.X_WO) for kf in frames]
     b = np.array([bounds(s) for s in scenes])
     lo, hi = b[:, 0].min(axis=0), b[:, 1].max(axis=0)
-    lo[2] = min(lo[2], 0.0)  # the floor is in view
+    lo[2] = min(lo[2], 0.0)  # the floor: at z = 0, or under the lowest point (a robot rooted at its pelvis)
     elev, azim = view_angles()
     scene_name = Path(str(view.plan.scene.get("file", view.file.name))).name
     out = []
@@ -118,7 +118,7 @@ def key_frame_pngs(view: PlanView, size: tuple[int, int] = (960, 720), source: s
         ax = fig.add_axes((0.0, 0.0, 1.0, 0.9), projection="3d")
         ax.computed_zorder = False
         ax.set_axis_off()
-        _draw_soup(ax, Poly3DCollection, _floor(lo, hi), zorder=0, edges=False)
+        _draw_soup(ax, Poly3DCollection, _floor(lo, hi, lo[2]), zorder=0, edges=False)
         _draw_soup(ax, Poly3DCollection, scene, zorder=1)
         _cube(ax, lo, hi)
         ax.view_init(elev=elev, azim=azim)

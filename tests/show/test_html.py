@@ -130,3 +130,12 @@ def test_pose_keys_drop_only_what_interpolation_restores():
     q = np.array(quat["values"])
     assert np.all(np.einsum("ij,ij->i", q[1:], q[:-1]) > 0)
 
+
+
+def test_the_floor_is_under_the_lowest_point_when_it_is_below_the_root():
+    """A robot whose root link is its pelvis: its feet and the table legs below W's origin
+    stand on the floor, not through it (issue 41); otherwise the floor is at z = 0."""
+    from regrasp_cli.show.html import _floor_grid
+
+    assert np.all(_floor_grid(np.array([-1.0, -1.0, -0.95]), np.ones(3))[:, 2] == -0.95)
+    assert np.all(_floor_grid(np.array([-1.0, -1.0, 0.3]), np.ones(3))[:, 2] == 0.0)

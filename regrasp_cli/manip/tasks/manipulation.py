@@ -622,7 +622,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     g = _Graph(scratch, lists, roadmap, {START: task.X_WO_start, GOAL: task.X_WO_goal}, graph, seed)
     if keep is not None:
         keep["graph"] = g
-    why, clock, last = {}, {}, None
+    why, failed, clock, last = {}, {}, {}, None
     t0 = time.perf_counter()
     usable = g.usable()
     tick(clock, "styles: necessary conditions", t0)
@@ -630,8 +630,8 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         cannot = ruled_out(STYLES[name], usable, bool(stable))
         if cannot:
             why[name] = cannot
-            last = Outcome(TASK, placements=dict(g.placements), counts=dict(g.counts),
-                           failure=PlanningFailed(Stage.GRASPS, cannot))
+            failed[name] = PlanningFailed(Stage.GRASPS, cannot)
+            last = Outcome(TASK, placements=dict(g.placements), counts=dict(g.counts), failure=failed[name])
             continue
         if name == "handover":
             t0 = time.perf_counter()
@@ -649,11 +649,22 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         clock.update({f"{name}: {k}": v for k, v in out.stages.items()})
         if out.failure is None:
             return replace(out, stages=clock, counts=dict(out.counts, styles=dict(why, **{name: "chosen"})))
-        why[name] = str(out.failure.reason)
+        why[name], failed[name] = str(out.failure.reason), out.failure
         last = out
-    reason = "; ".join(f"{k}: {v}" for k, v in why.items()) if len(why) > 1 else last.failure.reason
+    if len(failed) == 1:
+        return replace(last, stages=clock, counts=dict(last.counts, styles=why))
+    # the stage of the style that got farthest; the reason names each style's stage
+    far = max(failed.values(), key=lambda f: FARTHEST.index(f.stage) if f.stage in FARTHEST else -1)
+    reason = "; ".join(f"{k} (stage {_where(f)}): {f.reason}" for k, f in failed.items())
     return replace(last, stages=clock, counts=dict(last.counts, styles=why),
-                   failure=PlanningFailed(last.failure.stage, reason, last.failure.transition))
+                   failure=PlanningFailed(far.stage, reason, far.transition))
+
+
+FARTHEST = (Stage.ENDS, Stage.GRASPS, Stage.KEYS, Stage.TRANSITION)  # how far a style got, in order
+
+
+def _where(f: PlanningFailed) -> str:
+    return f.stage.value + (f" ({f.transition})" if f.transition else "")
 
 
 def plan_style(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
