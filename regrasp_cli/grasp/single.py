@@ -100,13 +100,10 @@ class HandModel:
         model = robot.model
         self.q = robot.q_rest.copy()
         self.q[h.idx] = h.open
-        # geometries of the palm and fingers: those whose joint is in the hand's subtree
-        hand_joints = {model.getJointId(robot.joint_names[i]) for i in h.idx}
+        # geometries of the palm and of every link that moves with the fingers
+        self.finger_of_joint = robot.hand_joints(hand)
+        hand_joints = set(self.finger_of_joint)
         palm_joint = model.frames[h.grasp_frame].parentJoint
-        self.finger_of_joint = {}
-        for f, idx in enumerate(h.finger_idx):
-            for i in idx:
-                self.finger_of_joint[model.getJointId(robot.joint_names[i])] = f
         src = robot.collision_model
         gm = pin.GeometryModel()
         self.owner: list[int] = []  # finger index of each geometry, -1 for the palm

@@ -242,7 +242,7 @@ def _palm_pairs(robot: Robot, hand: str, finger: int) -> pin.GeometryModel:
     h = robot.hands[hand]
     model, src = robot.model, robot.collision_model
     palm_joint = model.frames[h.grasp_frame].parentJoint
-    finger_joints = {model.getJointId(robot.joint_names[i]) for i in h.finger_idx[finger]}
+    finger_joints = {j for j, f in robot.hand_joints(hand).items() if f == finger}
     with_geometry = {go.parentJoint for go in src.geometryObjects}
     gm, palm, links = pin.GeometryModel(), [], []
     for go in src.geometryObjects:

@@ -47,9 +47,10 @@ def single_shape(geometry: coal.CollisionGeometry) -> HandShape:
 
 
 def palm_and_finger_links(robot: Robot, hand: str) -> set[str]:
-    """Names of the links of the palm and fingers of a hand."""
+    """Names of the links of the palm and fingers of a hand (every link that moves with
+    the fingers, :meth:`Robot.hand_joints`)."""
     h, model = robot.hands[hand], robot.model
-    joints = {model.getJointId(robot.joint_names[i]) for i in h.idx} | {model.frames[h.grasp_frame].parentJoint}
+    joints = set(robot.hand_joints(hand)) | {model.frames[h.grasp_frame].parentJoint}
     return {model.frames[go.parentFrame].name for go in robot.collision_model.geometryObjects
             if go.parentJoint in joints}
 
@@ -65,7 +66,7 @@ def hand_inputs(robot: Robot, hand: str, disabled_links: set[tuple[str, str]]) -
 
     h, model = robot.hands[hand], robot.model
     palm = model.frames[h.grasp_frame].parentJoint
-    joints = sorted({model.getJointId(robot.joint_names[i]) for i in h.idx})
+    joints = sorted(robot.hand_joints(hand))
     rnd = lambda X: np.round(np.asarray(X, dtype=float), 12).tolist()  # noqa: E731
 
     def joint(j: int) -> dict:

@@ -154,6 +154,27 @@ class Robot:
                               f"limits [{self.lower[f]:.4g}, {self.upper[f]:.4g}]; the leader's limits bind")
             self.lower[f], self.upper[f] = a, b
 
+    def hand_joints(self, hand: str) -> dict[int, int]:
+        """Pinocchio joint id -> finger index (robot.yaml order) of every joint that moves
+        with a hand's fingers: each finger's joints, the joints that follow them through
+        URDF mimics (a jaw's other side, PR2's parallel links) and every joint below those
+        (a fingertip on a mimic joint of its own).  The palm's joint is not one of them."""
+        model, h = self.model, self.hands[hand]
+        out: dict[int, int] = {}
+
+        def below(i: int, f: int) -> None:
+            for j in model.subtrees[model.getJointId(self.joint_names[i])]:
+                out.setdefault(int(j), f)
+
+        for f, idx in enumerate(h.finger_idx):  # a finger's own joints first: a jaw's follower is a finger
+            for i in idx:
+                below(int(i), f)
+        for f, idx in enumerate(h.finger_idx):  # then the followers no finger lists, with their leader's finger
+            for k, (lead, _, _) in sorted(self.mimic.items()):
+                if lead in idx:
+                    below(k, f)
+        return out
+
     # ------------------------------------------------------------------ names and indices
 
     @property

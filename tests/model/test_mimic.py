@@ -70,3 +70,43 @@ def test_a_chain_of_followers_is_composed_down_to_its_leader(tmp_path):
     q[lead] = 0.02
     assert r.coupled(q)[f] == pytest.approx(-0.03)
     assert r.to_pin(q)[r.model.joints[r.model.getJointId("l_gripper_r_finger_joint")].idx_q] == pytest.approx(-0.03)
+
+
+PR2_HAND = """format: regrasp.robot/1
+urdf: package://example-robot-data/robots/pr2_description/urdf/pr2.urdf
+groups:
+  torso: [torso_lift_joint]
+  right_arm: [r_shoulder_pan_joint, r_shoulder_lift_joint, r_upper_arm_roll_joint, r_elbow_flex_joint,
+              r_forearm_roll_joint, r_wrist_flex_joint, r_wrist_roll_joint]
+  left_arm: [l_shoulder_pan_joint, l_shoulder_lift_joint, l_upper_arm_roll_joint, l_elbow_flex_joint,
+             l_forearm_roll_joint, l_wrist_flex_joint, l_wrist_roll_joint]
+hands:
+  right:
+    grasp_frame: r_gripper_tool_frame
+    fingers:
+      - {name: l, joints: [r_gripper_l_finger_joint], tip_link: r_gripper_l_finger_tip_link, tip_radius: 0.008, open: [0.548]}
+      - {name: r, joints: [r_gripper_r_finger_joint], tip_link: r_gripper_r_finger_tip_link, tip_radius: 0.008, open: [0.548]}
+rest: {torso_lift_joint: 0.2}
+"""
+
+
+@pytest.mark.filterwarnings("ignore:.*l_gripper_r_parallel_root_joint")  # the left hand's, said alike
+def test_the_hand_model_holds_every_link_that_moves_with_the_fingers(tmp_path):
+    """PR2 as example-robot-data ships it: each fingertip hangs below a mimic joint of its
+    own, the parallel links follow the leader with multipliers 1 and -1.  The tips belong
+    to their fingers, the followers no finger lists to the leader's, and the grasp
+    search's hand model has the tips' geometry."""
+    import trimesh
+
+    from regrasp_cli.grasp.single import HandModel
+
+    (tmp_path / "robot.yaml").write_text(PR2_HAND)
+    with pytest.warns(UserWarning, match="r_gripper_r_parallel_root_joint follows r_gripper_l_finger_joint"):
+        r = load_robot(tmp_path / "robot.yaml")
+    owner = {r.model.names[j]: f for j, f in r.hand_joints("right").items()}
+    assert owner == {"r_gripper_l_finger_joint": 0, "r_gripper_l_finger_tip_joint": 0, "r_gripper_r_finger_joint": 1,
+                     "r_gripper_r_finger_tip_joint": 1, "r_gripper_l_parallel_root_joint": 0,
+                     "r_gripper_r_parallel_root_joint": 0}
+    hm = HandModel(r, "right", trimesh.creation.box((0.04, 0.04, 0.1)), set(), 0.002)
+    links = {r.model.frames[go.parentFrame].name for go in hm.gm.geometryObjects}
+    assert {"r_gripper_l_finger_tip_link", "r_gripper_r_finger_tip_link"} <= links
