@@ -257,8 +257,9 @@ class HandSpec:
     ``contact`` is the contact model for force closure: ``point`` (point contact with
     friction) or ``soft`` (soft finger, for parallel-jaw grippers).  ``kind`` says how
     its grasps are found: ``fingertips`` (seed 000: fingertip IK on surface points, for
-    fingers of three or more joints), ``jaw`` (two fingers on one prismatic joint each:
-    antipodal pairs of surface points, closing until contact), ``pads`` (fingers of one or
+    fingers of three or more joints), ``jaw`` (two fingers each closed by one prismatic or
+    revolute joint, or following one through URDF mimics: antipodal pairs of surface
+    points, closing until contact), ``pads`` (fingers of one or
     two joints: approach along a surface normal, each finger closed from ``open`` to
     ``closed`` until it touches) or ``auto`` (``jaw`` when the fingers are so, else
     ``pads`` when a finger has fewer than three joints, else ``fingertips``;

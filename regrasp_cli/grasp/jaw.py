@@ -57,8 +57,11 @@ class Jaw:
     width_closed: float  # m: gap between the pads, closed (0 when they meet)
     sign: np.ndarray  # (2,) +1 or -1: the sign of each finger's joint motion when closing
     closing_G: np.ndarray  # (2, 3) unit: the direction each pad moves when closing
-    travel: np.ndarray  # (2,) m: each finger's joint range from open to closed
-    coupled: bool  # finger 1 follows finger 0 through a URDF mimic joint
+    travel: np.ndarray  # (2,) m or rad: each finger's driving joint range from open to closed
+    coupled: bool  # both fingers close by one joint (the other follows it through URDF mimics)
+    drivers: tuple[int, int] = (-1, -1)  # index in q of the joint that closes each finger
+    speed: np.ndarray | None = None  # (2,) m per unit of the driver: a bound of each pad's speed
+    revolute: bool = False  # a driver turns: pads move on arcs (:func:`close_revolute`)
 
 
 def _finger_pairs(hm: HandModel, f: int) -> list[int]:
@@ -66,9 +69,16 @@ def _finger_pairs(hm: HandModel, f: int) -> list[int]:
     return [k for k, (fa, fb) in enumerate(hm.pair_fingers) if fa == f and fb is None]
 
 
+def drivers(robot, hand) -> np.ndarray:
+    """Index in q (2,) of the joint that closes each finger of a two-finger hand: the
+    finger's first joint, or the joint it follows through URDF mimics (the same for both
+    fingers of a coupled jaw)."""
+    return np.array([robot.mimic.get(int(i[0]), (int(i[0]),))[0] for i in hand.finger_idx])
+
+
 def _closed(robot, hand, q_open: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The hand closed (each finger joint at the limit farther from open): q, signs, ranges."""
-    idx = np.array([i[0] for i in hand.finger_idx])
+    """The hand closed (each finger's driver at the limit farther from open): q, signs, ranges."""
+    idx = drivers(robot, hand)
     lo, hi = robot.lower[idx], robot.upper[idx]
     o = q_open[idx]
     sign = np.where(hi - o >= o - lo, 1.0, -1.0)
@@ -77,13 +87,17 @@ def _closed(robot, hand, q_open: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     return robot.coupled(q), sign, np.abs(q[idx] - o)
 
 
-def _pad_gap(hm: HandModel, q: np.ndarray) -> float:
+def _pad_gap(hm: HandModel, q: np.ndarray, tips_only: bool = False) -> float:
     """Distance (m) between finger 0 and finger 1 at q, over the pairs the hand model
-    checks (not those disabled, such as sliding blocks that always touch)."""
-    robot = hm.robot
+    checks (not those disabled, such as sliding blocks that always touch); with
+    ``tips_only``, between their fingertip geometries (a turning finger's proximal links
+    pass near each other at the palm whatever the opening)."""
+    robot, tips = hm.robot, set(hm.hand.tip_frames)
     pin.updateGeometryPlacements(robot.model, hm.data, hm.gm, hm.gd, robot.to_pin(q))
+    tip = [go.parentFrame in tips for go in hm.gm.geometryObjects]
     gaps = [pin.computeDistance(hm.gm, hm.gd, k).min_distance - hm.erosion[cp.first] - hm.erosion[cp.second]
-            for k, cp in enumerate(hm.gm.collisionPairs) if set(hm.pair_fingers[k]) == {0, 1}]
+            for k, cp in enumerate(hm.gm.collisionPairs) if set(hm.pair_fingers[k]) == {0, 1}
+            and (not tips_only or (tip[cp.first] and tip[cp.second]))]
     return max(min(gaps, default=np.inf), 0.0)
 
 
@@ -96,7 +110,7 @@ def _distance(hm: HandModel, a: int, Xa: pin.SE3, b: int, Xb: pin.SE3) -> float:
 
 
 def jaw_geometry(hm: HandModel) -> Jaw:
-    """:class:`Jaw` of the hand model's hand (two fingers of one prismatic joint each)."""
+    """:class:`Jaw` of the hand model's hand (two fingers each closed by one joint)."""
     robot, hand = hm.robot, hm.hand
     model = robot.model
     q_open = hm.q
@@ -128,6 +142,10 @@ def jaw_geometry(hm: HandModel) -> Jaw:
         corners.append(pts)
         centres.append(pts.mean(axis=0))
     centre_G = (centres[0] + centres[1]) / 2
+    drive = drivers(robot, hand)
+    revolute = not robot.prismatic[drive].all()
+    if revolute:  # the pads move on arcs: the axis is the line between them, open
+        axis_G = (centres[1] - centres[0]) / max(float(np.linalg.norm(centres[1] - centres[0])), 1e-12)
     palm = [a for a, o in enumerate(hm.owner) if o == -1]
     palm_G = (np.mean([hm.gd.oMg[a].translation for a in palm], axis=0) @ X_GW[:3, :3].T + X_GW[:3, 3]
               if palm else np.zeros(3))
@@ -137,9 +155,33 @@ def jaw_geometry(hm: HandModel) -> Jaw:
         d = np.cross(axis_G, [1.0, 0, 0]) if abs(axis_G[0]) < 0.9 else np.cross(axis_G, [0, 1.0, 0])
     depth_G = d / np.linalg.norm(d)
     ext = [np.ptp(c @ depth_G) for c in corners]
-    coupled = any({int(f), int(lead[0])} == set(idx) for f, lead in robot.mimic.items())
-    return Jaw(axis_G, centre_G, depth_G, 0.25 * min(ext), _pad_gap(hm, q_open), _pad_gap(hm, q_closed),
-               sign, closing_G, travel, coupled)
+    # a turning finger's proximal links curl in behind its pad: contacts reach out to the tip
+    return Jaw(axis_G, centre_G, depth_G, (0.5 if revolute else 0.25) * min(ext), _pad_gap(hm, q_open, revolute),
+               _pad_gap(hm, q_closed, revolute), sign, closing_G, travel, bool(drive[0] == drive[1]), (int(drive[0]), int(drive[1])),
+               np.array([_pad_speed(hm, f, int(drive[f])) for f in (0, 1)]), bool(revolute))
+
+
+def _pad_speed(hm: HandModel, f: int, driver: int) -> float:
+    """A bound (m per unit of the driver) of how fast any point of finger f's geometries
+    moves when the driver moves: over the joints between the palm and each geometry, the
+    driver's and its followers' rates (1, or the mimic multiplier) times the joint's reach
+    (:func:`motion.local.joint_reach`; 1 for a prismatic joint)."""
+    from regrasp_cli.motion.local import joint_reach
+
+    robot, model = hm.robot, hm.robot.model
+    reach = joint_reach(robot)
+    rate = {driver: 1.0} | {k: abs(m) for k, (lead, m, _) in robot.mimic.items() if lead == driver}
+    best = 0.0
+    for a, o in enumerate(hm.owner):
+        if o != f:
+            continue
+        v, j = 0.0, hm.gm.geometryObjects[a].parentJoint
+        while j > 0:
+            i = j - 1  # the joint's index in q (every joint has one degree of freedom)
+            v += rate.get(i, 0.0) * reach[i]
+            j = model.parents[j]
+        best = max(best, v)
+    return best
 
 
 def antipodal_pairs(mesh: trimesh.Trimesh, surface: Surface, friction: float, width: tuple[float, float],
@@ -239,6 +281,8 @@ def close_jaw(hm: HandModel, jaw: Jaw, X_OG: np.ndarray) -> tuple[np.ndarray, np
     q = hm.q.copy()
     if hm.collides(q, {0, 1}, None):  # open hand (palm, pads) inside the object
         return None
+    if jaw.revolute:
+        return close_revolute(hm, jaw, X_OG, q)
     R_WG = hm.X_WG[:3, :3]
     gaps = []
     for f in (0, 1):  # each pad alone: a prismatic finger translates its pad
@@ -257,6 +301,63 @@ def close_jaw(hm: HandModel, jaw: Jaw, X_OG: np.ndarray) -> tuple[np.ndarray, np
     for f in (0, 1):
         q[idx[f]] += jaw.sign[f] * gaps[f]
     return X_OG, robot.coupled(q)
+
+
+def _gap(hm: HandModel, f: int, q: np.ndarray) -> float:
+    """Distance (m) from finger f's true pads (not their eroded copies) to the object, the
+    hand at q and the object where :meth:`HandModel.set_object` put it."""
+    robot = hm.robot
+    pin.updateGeometryPlacements(robot.model, hm.data, hm.gm, hm.gd, robot.to_pin(q))
+    X_obj = hm.gd.oMg[hm.obj]
+    return min(_distance(hm, a, hm.gd.oMg[a], hm.obj, X_obj) - hm.erosion[a]
+               for a, o in enumerate(hm.owner) if o == f)
+
+
+def _pad_centre_G(hm: HandModel, f: int) -> np.ndarray:
+    """Mean position (3,) in G of finger f's geometries, at the placements last computed."""
+    X_GW = inverse(hm.X_WG)
+    c = np.mean([hm.gd.oMg[a].translation for a, o in enumerate(hm.owner) if o == f], axis=0)
+    return X_GW[:3, :3] @ c + X_GW[:3, 3]
+
+
+def close_revolute(hm: HandModel, jaw: Jaw, X_OG: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`close_jaw` for fingers that turn (or follow a joint that does): each driver
+    advances by conservative steps, the pad's gap over its speed bound (a step that cannot
+    make it touch), until the pad is within ``CONTACT_GAP``.  A coupled jaw closes by one
+    driver: before each step the hand is shifted along the line between its pads by half
+    the difference of their gaps, so that both touch together (a gripper centres what it
+    holds).  None when a driver reaches its limit without contact."""
+    robot, X_OG = hm.robot, X_OG.copy()
+    far = [q[d] + jaw.sign[f] * jaw.travel[f] for f, d in enumerate(jaw.drivers)]
+    active = [0] if jaw.coupled else [0, 1]
+    done = set()
+    for _ in range(ADVANCE_ITERATIONS):
+        gaps = [_gap(hm, f, q) for f in (0, 1)]
+        if jaw.coupled:
+            if max(gaps) < CONTACT_GAP:
+                return X_OG, robot.coupled(q)
+            c0, c1 = _pad_centre_G(hm, 0), _pad_centre_G(hm, 1)
+            u = (c1 - c0) / max(float(np.linalg.norm(c1 - c0)), 1e-12)
+            X_OG[:3, 3] += X_OG[:3, :3] @ (u * (gaps[0] - gaps[1]) / 2)  # the farther pad comes as near as the other
+            hm.set_object(X_OG)
+            gaps = [_gap(hm, f, q) for f in (0, 1)]
+            step = min(gaps) / max(float(jaw.speed.max()), 1e-9)
+        for f in active:
+            if f in done:
+                continue
+            d = jaw.drivers[f]
+            if not jaw.coupled:
+                if gaps[f] < CONTACT_GAP:
+                    done.add(f)
+                    continue
+                step = gaps[f] / max(float(jaw.speed[f]), 1e-9)
+            q[d] += jaw.sign[f] * step
+            if jaw.sign[f] * (q[d] - far[f]) > 1e-12:
+                return None
+            q = robot.coupled(q)
+        if not jaw.coupled and len(done) == 2:
+            return X_OG, robot.coupled(q)
+    return None
 
 
 def outside_distance(geometry, grow: float, local: np.ndarray) -> np.ndarray:

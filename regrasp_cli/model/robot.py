@@ -144,12 +144,10 @@ class Robot:
         limits of the follower cut that range (PR2's gripper joints of multiplier -1 and
         limits [0, 0.548] are outside them at every leader value but 0), a warning says so
         at load, and the planner and the validator both use the mapped range."""
-        import warnings
-
         for f, (lead, m, o) in self.mimic.items():
             a, b = sorted((m * self.lower[lead] + o, m * self.upper[lead] + o))
             if a < self.lower[f] - 1e-9 or b > self.upper[f] + 1e-9:
-                warnings.warn(f"{self.spec.urdf}: joint {self.joint_names[f]} follows {self.joint_names[lead]} "
+                _warn_once(f"{self.spec.urdf}: joint {self.joint_names[f]} follows {self.joint_names[lead]} "
                               f"(mimic multiplier {m:g}, offset {o:g}) over [{a:.4g}, {b:.4g}], outside its own "
                               f"limits [{self.lower[f]:.4g}, {self.upper[f]:.4g}]; the leader's limits bind")
             self.lower[f], self.upper[f] = a, b
@@ -241,13 +239,16 @@ class Robot:
         return self.model.addFrame(pin.Frame(name, f.parentJoint, parent, X, pin.FrameType.OP_FRAME))
 
     def _hand_kind(self, h: HandSpec, finger_idx: tuple[np.ndarray, ...]) -> str:
-        """``jaw`` for two fingers of one prismatic joint each, ``pads`` when a finger has
-        fewer than three joints, else ``fingertips`` (unless robot.yaml states it; a stated
-        jaw must be such a hand)."""
-        jaw = len(finger_idx) == 2 and all(len(i) == 1 and self.prismatic[i[0]] for i in finger_idx)
+        """``jaw`` for two fingers each closed by one joint (prismatic or revolute; the
+        finger's joints that follow it through URDF mimics, a fingertip on a mimic joint,
+        do not count), ``pads`` when a finger has fewer than three joints, else
+        ``fingertips`` (unless robot.yaml states it; a stated jaw must be such a hand)."""
+        drivers = [{self.mimic.get(int(i), (int(i),))[0] for i in idx} for idx in finger_idx]
+        jaw = len(finger_idx) == 2 and all(len(d) == 1 for d in drivers)
         if h.kind == "jaw" and not jaw:
             raise InputError(self.spec.file, f"hands.{h.side}.kind",
-                             "a jaw needs two fingers of one prismatic joint each")
+                             "a jaw needs two fingers each closed by one joint (prismatic or revolute, or one its "
+                             "other joints follow through URDF mimics)")
         few = any(len(i) < 3 for i in finger_idx)
         kind = ("jaw" if jaw else "pads" if few else "fingertips") if h.kind == "auto" else h.kind
         if kind == "fingertips" and len(finger_idx) > 2 and h.opposing is None:
@@ -390,17 +391,26 @@ def _mimic_joints(spec: RobotSpec) -> dict[str, tuple[str, float, float]]:
     return out
 
 
+_SAID: set[str] = set()  # the URDF's warnings said in this process (a command loads its robot more than once)
+
+
+def _warn_once(message: str) -> None:
+    import warnings
+
+    if message not in _SAID:
+        _SAID.add(message)
+        warnings.warn(message, stacklevel=3)
+
+
 def _checked_mimic(spec: RobotSpec, names: list[str]) -> dict[str, tuple[str, float, float]]:
     """:func:`_mimic_joints` between joints of the model, each follower of a follower
     composed down to the joint that follows none (q_f = m_f (m_l q_r + o_l) + o_f).  A mimic
     naming a joint the URDF does not have is said in a warning (the follower then moves
     as a joint of its own); a cycle of mimics (a joint following itself) is refused."""
-    import warnings
-
     found = _mimic_joints(spec)
     for f, (leader, _, _) in found.items():
         if f in names and leader not in names:
-            warnings.warn(f"{spec.urdf}: joint {f}.mimic names joint {shown(leader)}, which the URDF has not (or "
+            _warn_once(f"{spec.urdf}: joint {f}.mimic names joint {shown(leader)}, which the URDF has not (or "
                           f"not as a moving joint); {f} moves as a joint of its own")
     direct = {f: v for f, v in found.items() if f in names and v[0] in names}
     out = {}

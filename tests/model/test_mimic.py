@@ -100,7 +100,13 @@ def test_the_hand_model_holds_every_link_that_moves_with_the_fingers(tmp_path):
 
     from regrasp_cli.grasp.single import HandModel
 
-    (tmp_path / "robot.yaml").write_text(PR2_HAND)
+    from regrasp_cli.config import load_robot_spec
+
+    (tmp_path / "stock.yaml").write_text(PR2_HAND)
+    stock = load_robot_spec(tmp_path / "stock.yaml").urdf  # a copy: the warning is said once per file and process
+    (tmp_path / "pr2.urdf").write_bytes(stock.read_bytes())
+    (tmp_path / "robot.yaml").write_text(PR2_HAND.replace(
+        "package://example-robot-data/robots/pr2_description/urdf/pr2.urdf", str(tmp_path / "pr2.urdf")))
     with pytest.warns(UserWarning, match="r_gripper_r_parallel_root_joint follows r_gripper_l_finger_joint"):
         r = load_robot(tmp_path / "robot.yaml")
     owner = {r.model.names[j]: f for j, f in r.hand_joints("right").items()}
