@@ -309,6 +309,7 @@ class RobotSpec:
     srdf_disabled: tuple[tuple[str, str], ...] = ()
     convex_hulls: bool = True  # mesh collision geometries replaced by their convex hulls
     collision_from_visual: tuple[str, ...] = ()  # links whose visual geometry is their collision geometry
+    exact_meshes: tuple[str, ...] = ()  # links that keep their meshes when convex_hulls is on (curled fingers)
 
 
 def _find_package_share(package: str) -> list[Path]:
@@ -343,7 +344,7 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     file, data = read_yaml(path)
     f = Fields(file, data)
     f.only("format", "urdf", "srdf", "groups", "hands", "rest", "disabled_collisions", "self_collision",
-           "convex_hulls", "collision_from_visual")
+           "convex_hulls", "collision_from_visual", "exact_meshes")
     if f.str("format") != ROBOT_FORMAT:
         raise f.error("format", f"expected '{ROBOT_FORMAT}', found {shown(f.data['format'])}")
     urdf, package_dirs = resolve_urdf(file, "urdf", f.str("urdf"))
@@ -395,7 +396,7 @@ def load_robot_spec(path: str | Path) -> RobotSpec:
     if not isinstance(hulls, bool):
         raise f.error("convex_hulls", f"expected true or false, found {shown(hulls)}")
     return RobotSpec(file, urdf, package_dirs, groups, hands, rest, tuple(pairs), sc, srdf, srdf_pairs, hulls,
-                     f.names("collision_from_visual", ()))
+                     f.names("collision_from_visual", ()), f.names("exact_meshes", ()))
 
 
 def _srdf_disabled(srdf: Path, file: Path) -> list[tuple[str, str]]:

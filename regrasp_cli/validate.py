@@ -483,9 +483,9 @@ def fingertip_issues(plan: Plan, inputs: Inputs, poses: list[tuple[np.ndarray, n
 
 def _finger_distance(robot: Robot, hand, finger: int, q: np.ndarray, p_W: np.ndarray) -> float:
     """Distance (m) from the point p_W (3,) to the surface of the collision geometries
-    carried by the finger's joints at q (its pads), by coal: 0 on the surface, the depth
-    when inside."""
-    joints = {robot.model.getJointId(robot.joint_names[i]) for i in hand.finger_idx[finger]}
+    that move with the finger at q (its pads, a tip on a mimic joint of its own:
+    :meth:`Robot.hand_joints`), by coal: 0 on the surface, the depth when inside."""
+    joints = {j for j, f in robot.hand_joints(hand.spec.side).items() if f == finger}
     data = robot.model.createData()
     pin.forwardKinematics(robot.model, data, robot.to_pin(q))
     point, X_point = coal.Sphere(1e-9), coal.Transform3s(np.eye(3), p_W)

@@ -94,7 +94,7 @@ class Robot:
             raise InputError(spec.file, "urdf", f"{spec.urdf} has no <collision> geometry in any link; expected "
                                                 "collision geometry (or `collision_from_visual: [LINK, ...]` here)")
         if spec.convex_hulls:
-            _convexify(collision)
+            _convexify(spec, model, collision)
         self.collision_model: pin.GeometryModel = collision
         self.visual_model: pin.GeometryModel = visual
 
@@ -359,13 +359,18 @@ def _collision_from_visual(spec: RobotSpec, model: pin.Model, collision: pin.Geo
             collision.addGeometryObject(go)
 
 
-def _convexify(gm: pin.GeometryModel) -> None:
+def _convexify(spec: RobotSpec, model: pin.Model, gm: pin.GeometryModel) -> None:
     """Every mesh geometry of ``gm`` replaced by its convex hull (robot.yaml's
     ``convex_hulls``, on by default): it contains the mesh, so a configuration free with
     hulls is free with the meshes, and a scanned link of 20,000 triangles becomes a hull
-    of a few hundred points that coal checks 10-50x faster."""
+    of a few hundred points that coal checks 10-50x faster.  The ``exact_meshes`` links
+    keep their meshes: a finger that curls in behind its pad (PR2's) has a hull that
+    fills the space the jaw closes on."""
+    for link in spec.exact_meshes:
+        if not model.existFrame(link):
+            raise InputError(spec.file, "exact_meshes", f"expected links of {spec.urdf.name}, found {shown(link)}")
     for go in gm.geometryObjects:
-        if isinstance(go.geometry, coal.BVHModelBase):
+        if isinstance(go.geometry, coal.BVHModelBase) and model.frames[go.parentFrame].name not in spec.exact_meshes:
             hull = trimesh.convex.convex_hull(np.asarray(go.geometry.vertices()))
             go.geometry = coal.Convex.convexHull(list(hull.vertices), False, None)
 

@@ -296,6 +296,8 @@ def cache_key(robot: Robot) -> dict:
            "version": CACHE_VERSION}
     if robot.spec.collision_from_visual:  # absent otherwise: the keys of robots without it unchanged
         key["from_visual"] = list(robot.spec.collision_from_visual)
+    if robot.spec.exact_meshes and robot.spec.convex_hulls:  # likewise
+        key["exact_meshes"] = sorted(robot.spec.exact_meshes)
     return key
 
 

@@ -105,33 +105,13 @@ def test_a_revolute_coupled_jaw_closes_symmetrically_on_a_cube(tmp_path, multipl
     _check(robot, *_grasps(robot))
 
 
-PR2 = """format: regrasp.robot/1
-urdf: package://example-robot-data/robots/pr2_description/urdf/pr2.urdf
-groups:
-  torso: [torso_lift_joint]
-  right_arm: [r_shoulder_pan_joint, r_shoulder_lift_joint, r_upper_arm_roll_joint, r_elbow_flex_joint,
-              r_forearm_roll_joint, r_wrist_flex_joint, r_wrist_roll_joint]
-  left_arm: [l_shoulder_pan_joint, l_shoulder_lift_joint, l_upper_arm_roll_joint, l_elbow_flex_joint,
-             l_forearm_roll_joint, l_wrist_flex_joint, l_wrist_roll_joint]
-hands:
-  right:
-    grasp_frame: r_gripper_tool_frame
-    contact: soft
-    fingers:
-      - {name: l, joints: [r_gripper_l_finger_joint], tip_link: r_gripper_l_finger_tip_link, tip_radius: 0.008,
-         open: [0.548]}
-      - {name: r, joints: [r_gripper_r_finger_joint], tip_link: r_gripper_r_finger_tip_link, tip_radius: 0.008,
-         open: [0.548]}
-rest: {torso_lift_joint: 0.2}
-convex_hulls: false
-"""
+PR2 = Path(__file__).resolve().parents[2] / "regrasp_cli" / "data" / "robots" / "pr2" / "robot.yaml"
 
 
 @pytest.mark.filterwarnings("ignore:.*parallel_root_joint")  # PR2's followers of multiplier -1: said at load
-def test_pr2_s_stock_gripper_closes_on_a_cube(tmp_path):
-    """The fingers' proximal links curl in behind the pads: their exact meshes, not hulls."""
-    (tmp_path / "robot.yaml").write_text(PR2)
-    robot = load_robot(tmp_path / "robot.yaml")
+def test_pr2_s_stock_gripper_closes_on_a_cube():
+    """The shipped PR2 (its fingers' proximal links curl in behind the pads: exact meshes)."""
+    robot = load_robot(PR2)
     palm = {"r_gripper_palm_link", "r_gripper_l_finger_link", "r_gripper_r_finger_link"}
     adjacent = {(a, b) for a in palm for b in palm if a < b}  # hinged together: they touch by design
     _check(robot, *_grasps(robot, adjacent))

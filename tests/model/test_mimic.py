@@ -72,22 +72,7 @@ def test_a_chain_of_followers_is_composed_down_to_its_leader(tmp_path):
     assert r.to_pin(q)[r.model.joints[r.model.getJointId("l_gripper_r_finger_joint")].idx_q] == pytest.approx(-0.03)
 
 
-PR2_HAND = """format: regrasp.robot/1
-urdf: package://example-robot-data/robots/pr2_description/urdf/pr2.urdf
-groups:
-  torso: [torso_lift_joint]
-  right_arm: [r_shoulder_pan_joint, r_shoulder_lift_joint, r_upper_arm_roll_joint, r_elbow_flex_joint,
-              r_forearm_roll_joint, r_wrist_flex_joint, r_wrist_roll_joint]
-  left_arm: [l_shoulder_pan_joint, l_shoulder_lift_joint, l_upper_arm_roll_joint, l_elbow_flex_joint,
-             l_forearm_roll_joint, l_wrist_flex_joint, l_wrist_roll_joint]
-hands:
-  right:
-    grasp_frame: r_gripper_tool_frame
-    fingers:
-      - {name: l, joints: [r_gripper_l_finger_joint], tip_link: r_gripper_l_finger_tip_link, tip_radius: 0.008, open: [0.548]}
-      - {name: r, joints: [r_gripper_r_finger_joint], tip_link: r_gripper_r_finger_tip_link, tip_radius: 0.008, open: [0.548]}
-rest: {torso_lift_joint: 0.2}
-"""
+PR2 = ROOT / "regrasp_cli" / "data" / "robots" / "pr2" / "robot.yaml"
 
 
 @pytest.mark.filterwarnings("ignore:.*l_gripper_r_parallel_root_joint")  # the left hand's, said alike
@@ -102,10 +87,9 @@ def test_the_hand_model_holds_every_link_that_moves_with_the_fingers(tmp_path):
 
     from regrasp_cli.config import load_robot_spec
 
-    (tmp_path / "stock.yaml").write_text(PR2_HAND)
-    stock = load_robot_spec(tmp_path / "stock.yaml").urdf  # a copy: the warning is said once per file and process
+    stock = load_robot_spec(PR2).urdf  # a copy: the warning is said once per file and process
     (tmp_path / "pr2.urdf").write_bytes(stock.read_bytes())
-    (tmp_path / "robot.yaml").write_text(PR2_HAND.replace(
+    (tmp_path / "robot.yaml").write_text(PR2.read_text().replace(
         "package://example-robot-data/robots/pr2_description/urdf/pr2.urdf", str(tmp_path / "pr2.urdf")))
     with pytest.warns(UserWarning, match="r_gripper_r_parallel_root_joint follows r_gripper_l_finger_joint"):
         r = load_robot(tmp_path / "robot.yaml")
