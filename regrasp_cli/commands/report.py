@@ -45,10 +45,14 @@ def print_info(scene: Path, cache_dir: Path, seed: int | None, console: Console 
         t.add_row(g, str(len(idx)), ", ".join(robot.joint_names[i] for i in idx) or "-")
     for side, h in robot.hands.items():
         t.add_row(f"{side} hand", str(len(h.idx)),
-                  f"{len(h.spec.fingers)} fingers ({', '.join(f.name for f in h.spec.fingers)}), "
+                  f"{len(h.spec.fingers)} fingers ({', '.join(f.name for f in h.spec.fingers)}), kind {h.kind}, "
                   f"grasp frame {h.spec.grasp_frame}, {h.spec.contact} contact")
     grouped = set(np.concatenate([*robot.groups.values(), *(h.idx for h in robot.hands.values())]).tolist())
-    other = [robot.joint_names[i] for i in range(robot.nq) if i not in grouped]
+    followers = [f"{robot.joint_names[i]} ({robot.joint_names[robot.mimic[i][0]]})" for i in range(robot.nq)
+                 if i not in grouped and i in robot.mimic]
+    other = [robot.joint_names[i] for i in range(robot.nq) if i not in grouped and i not in robot.mimic]
+    if followers:
+        t.add_row("mimic (follows)", str(len(followers)), ", ".join(followers))
     if other:
         t.add_row("other (held at rest)", str(len(other)), ", ".join(other))
     t.add_row("total", str(robot.nq), "")
