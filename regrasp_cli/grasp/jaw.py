@@ -73,7 +73,7 @@ def drivers(robot, hand) -> np.ndarray:
     """Index in q (2,) of the joint that closes each finger of a two-finger hand: the
     finger's first joint, or the joint it follows through URDF mimics (the same for both
     fingers of a coupled jaw)."""
-    return np.array([robot.mimic.get(int(i[0]), (int(i[0]),))[0] for i in hand.finger_idx])
+    return np.array([robot.driver(int(i[0])) for i in hand.finger_idx])
 
 
 def _closed(robot, hand, q_open: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -157,7 +157,8 @@ def jaw_geometry(hm: HandModel) -> Jaw:
     ext = [np.ptp(c @ depth_G) for c in corners]
     # a turning finger's proximal links curl in behind its pad: contacts reach out to the tip
     return Jaw(axis_G, centre_G, depth_G, (0.5 if revolute else 0.25) * min(ext), _pad_gap(hm, q_open, revolute),
-               _pad_gap(hm, q_closed, revolute), sign, closing_G, travel, bool(drive[0] == drive[1]), (int(drive[0]), int(drive[1])),
+               _pad_gap(hm, q_closed, revolute), sign, closing_G, travel, bool(drive[0] == drive[1]),
+               (int(drive[0]), int(drive[1])),
                np.array([_pad_speed(hm, f, int(drive[f])) for f in (0, 1)]), bool(revolute))
 
 
@@ -303,14 +304,20 @@ def close_jaw(hm: HandModel, jaw: Jaw, X_OG: np.ndarray) -> tuple[np.ndarray, np
     return X_OG, robot.coupled(q)
 
 
-def _gap(hm: HandModel, f: int, q: np.ndarray) -> float:
-    """Distance (m) from finger f's true pads (not their eroded copies) to the object, the
-    hand at q and the object where :meth:`HandModel.set_object` put it."""
+def _gaps(hm: HandModel, q: np.ndarray) -> list[float]:
+    """Distance (m) from each finger's true pads (not their eroded copies) to the object,
+    the hand at q (one placement update for both) and the object where
+    :meth:`HandModel.set_object` put it."""
     robot = hm.robot
     pin.updateGeometryPlacements(robot.model, hm.data, hm.gm, hm.gd, robot.to_pin(q))
     X_obj = hm.gd.oMg[hm.obj]
-    return min(_distance(hm, a, hm.gd.oMg[a], hm.obj, X_obj) - hm.erosion[a]
-               for a, o in enumerate(hm.owner) if o == f)
+    return [min(_distance(hm, a, hm.gd.oMg[a], hm.obj, X_obj) - hm.erosion[a]
+                for a, o in enumerate(hm.owner) if o == f) for f in (0, 1)]
+
+
+def _gap(hm: HandModel, f: int, q: np.ndarray) -> float:
+    """:func:`_gaps` of finger f."""
+    return _gaps(hm, q)[f]
 
 
 def _pad_centre_G(hm: HandModel, f: int) -> np.ndarray:
@@ -332,7 +339,7 @@ def close_revolute(hm: HandModel, jaw: Jaw, X_OG: np.ndarray, q: np.ndarray) -> 
     active = [0] if jaw.coupled else [0, 1]
     done = set()
     for _ in range(ADVANCE_ITERATIONS):
-        gaps = [_gap(hm, f, q) for f in (0, 1)]
+        gaps = _gaps(hm, q)
         if jaw.coupled:
             if max(gaps) < CONTACT_GAP:
                 return X_OG, robot.coupled(q)
@@ -340,7 +347,7 @@ def close_revolute(hm: HandModel, jaw: Jaw, X_OG: np.ndarray, q: np.ndarray) -> 
             u = (c1 - c0) / max(float(np.linalg.norm(c1 - c0)), 1e-12)
             X_OG[:3, 3] += X_OG[:3, :3] @ (u * (gaps[0] - gaps[1]) / 2)  # the farther pad comes as near as the other
             hm.set_object(X_OG)
-            gaps = [_gap(hm, f, q) for f in (0, 1)]
+            gaps = _gaps(hm, q)
             step = min(gaps) / max(float(jaw.speed.max()), 1e-9)
         for f in active:
             if f in done:

@@ -152,6 +152,10 @@ class Robot:
                               f"limits [{self.lower[f]:.4g}, {self.upper[f]:.4g}]; the leader's limits bind")
             self.lower[f], self.upper[f] = a, b
 
+    def driver(self, i: int) -> int:
+        """Index in q of the joint that moves joint ``i``: its mimic leader, or itself."""
+        return self.mimic[i][0] if i in self.mimic else int(i)
+
     def hand_joints(self, hand: str) -> dict[int, int]:
         """Pinocchio joint id -> finger index (robot.yaml order) of every joint that moves
         with a hand's fingers: each finger's joints, the joints that follow them through
@@ -243,7 +247,7 @@ class Robot:
         finger's joints that follow it through URDF mimics, a fingertip on a mimic joint,
         do not count), ``pads`` when a finger has fewer than three joints, else
         ``fingertips`` (unless robot.yaml states it; a stated jaw must be such a hand)."""
-        drivers = [{self.mimic.get(int(i), (int(i),))[0] for i in idx} for idx in finger_idx]
+        drivers = [{self.driver(int(i)) for i in idx} for idx in finger_idx]
         jaw = len(finger_idx) == 2 and all(len(d) == 1 for d in drivers)
         if h.kind == "jaw" and not jaw:
             raise InputError(self.spec.file, f"hands.{h.side}.kind",
