@@ -111,8 +111,11 @@ def cold_start(geometry_data: pin.GeometryData, distances: bool = True) -> None:
 
 
 def eroded_geometry(geom: coal.CollisionGeometry, tol: float) -> coal.CollisionGeometry | None:
-    """The primitive ``geom`` shrunk by ``tol`` (m) on every side, or None for other shapes."""
+    """The primitive or convex hull ``geom`` shrunk by ``tol`` (m) on every side, or None
+    for other shapes (a mesh)."""
     tiny = 1e-6
+    if isinstance(geom, coal.ConvexBase):
+        return _eroded_hull(np.asarray(geom.points()), tol)
     if isinstance(geom, coal.Sphere):
         return coal.Sphere(max(geom.radius - tol, tiny))
     if isinstance(geom, coal.Capsule):
@@ -158,6 +161,26 @@ class CollisionModel:
         if gid < self.n_robot:
             return self.robot.model.frames[go.parentFrame].name
         return go.name
+
+
+def _eroded_hull(points: np.ndarray, tol: float) -> coal.ConvexBase:
+    """The convex hull of ``points`` (k, 3) shrunk by ``tol`` (m): its facets' half-spaces
+    moved inward by tol and intersected (scipy's Qhull).  A hull thinner than 2 tol leaves
+    a point: a tetrahedron of 1 micrometre at the mean of its points."""
+    from scipy.optimize import linprog
+    from scipy.spatial import ConvexHull, HalfspaceIntersection
+
+    eq = ConvexHull(points).equations  # (f, 4): n.x + d <= 0 inside, n unit
+    # the Chebyshev centre: max r subject to n.x + d + r <= 0
+    lp = linprog(np.r_[0.0, 0.0, 0.0, -1.0], A_ub=np.c_[eq[:, :3], np.ones(len(eq))], b_ub=-eq[:, 3],
+                 bounds=[(None, None)] * 3 + [(0.0, None)], method="highs")
+    centre, depth = lp.x[:3], lp.x[3]
+    if depth <= tol + 1e-6:
+        corners = points.mean(axis=0) + 1e-6 * np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0], [-1.0, -1.0, -1.0]])
+        return coal.Convex.convexHull(list(corners), False, None)
+    shrunk = eq.copy()
+    shrunk[:, 3] += tol
+    return coal.Convex.convexHull(list(HalfspaceIntersection(shrunk, centre).intersections), False, None)
 
 
 def _eroded(gm: pin.GeometryModel, alias: dict, gid: int, tol: float) -> int:

@@ -300,6 +300,23 @@ def test_eroded_geometry():
     assert eroded_geometry(mesh_geometry(trimesh.creation.box(extents=[0.1, 0.1, 0.1])), 0.01) is None
 
 
+def test_a_convex_hull_erodes_by_its_faces():
+    """A hull (robot links under ``convex_hulls``, G1's and Alex's fingertips) shrinks by
+    the tolerance on every side: a box's hull to the smaller box, a sphere's to a radius
+    tol less (within the facets' sag); one thinner than twice the tolerance to a point
+    inside it."""
+    def hull(mesh):
+        return coal.Convex.convexHull(list(mesh.vertices), False, None)
+
+    box = np.asarray(eroded_geometry(hull(trimesh.creation.box(extents=[0.02, 0.04, 0.06])), 0.002).points())
+    assert np.allclose(box.min(axis=0), [-0.008, -0.018, -0.028]) and np.allclose(box.max(axis=0), [0.008, 0.018, 0.028])
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.01)
+    r = np.linalg.norm(np.asarray(eroded_geometry(hull(ball), 0.002).points()), axis=1)
+    assert np.all((r > 0.0079) & (r < 0.0080 + 1e-9))
+    plate = np.asarray(eroded_geometry(hull(trimesh.creation.box(extents=[0.003, 0.04, 0.06])), 0.002).points())
+    assert np.ptp(plate, axis=0).max() < 1e-5 and np.allclose(plate.mean(axis=0), 0.0, atol=1e-5)
+
+
 # --------------------------------------------------------------------------- segments
 
 

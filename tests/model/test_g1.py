@@ -65,16 +65,18 @@ def test_convex_hulls_must_be_a_boolean(tmp_path):
 
 
 def test_the_grasp_search_lets_the_hull_fingertips_touch_the_object(g1):
-    """The Dex3 fingertips are convex hulls, which cannot be shrunk by the contact
-    tolerance: they touch the object with no clearance, while every other hand link keeps
-    GraspOptions.link_clearance (with it on the fingertips, no grasp of the block closed)."""
+    """The Dex3 fingertips are convex hulls: shrunk by the contact tolerance, they may
+    enter the object by that much and are checked against it with no clearance, while
+    every other hand link keeps GraspOptions.link_clearance (with it on the fingertips, no
+    grasp of the block closed)."""
     from regrasp_cli.grasp.single import GraspOptions, HandModel
 
     clearance = GraspOptions().link_clearance
     hm = HandModel(g1, "right", trimesh.creation.box((0.06, 0.06, 0.18)), set(), 0.002, clearance)
-    margins = {bool(hm.is_tip[cp.first]): set() for cp in hm.gm.collisionPairs}
+    n = len(hm.owner)
+    margins = {True: set(), False: set()}
     for k, cp in enumerate(hm.gm.collisionPairs):
         if cp.second == hm.obj:
             margins[bool(hm.is_tip[cp.first])].add(hm.gd.collisionRequests[k].security_margin)
-    assert any(hm.is_tip) and not any(hm.erosion[:len(hm.owner)])  # tips, none of them eroded
+    assert any(hm.is_tip) and [e == 0.002 for e in hm.erosion[:n]] == hm.is_tip  # the tips, eroded
     assert margins == {True: {0.0}, False: {clearance}}
