@@ -14,6 +14,8 @@ joints together, so a finger's links lean by their joint angles when they touch.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -24,6 +26,7 @@ from regrasp_cli.grasp import pads as P
 from regrasp_cli.grasp.single import GraspOptions, HandModel
 from regrasp_cli.grasp.surface import build_surface
 from regrasp_cli.model.robot import load_robot
+from regrasp_cli.model.selfcollision import disabled_pairs
 
 MU = 0.5
 FINGER_Y = 0.05  # m: the fingers' first joints at y = +-FINGER_Y
@@ -153,3 +156,36 @@ def test_cylinder_contact_normals_lean_by_the_link_angle(gripper, radius, closur
     if grasp is not None:  # the stored normals are the same, mirror images of each other
         lean_stored = np.degrees(np.arctan2(np.abs(grasp.normals[:, 0]), np.abs(grasp.normals[:, 1])))
         assert np.allclose(lean_stored, leans, atol=3.0)
+
+
+ALEX = Path(__file__).resolve().parents[2] / "regrasp_cli" / "data" / "robots" / "alex" / "robot.yaml"
+
+
+@pytest.mark.filterwarnings("ignore:.*mimic names joint")  # the stock URDF's, said at load (tests/model/test_mimic.py)
+def test_alex_s_stock_five_finger_hand_holds_a_can(tmp_path):
+    """The shipped Alex: PSYONIC hands of a thumb and four fingers of two joints each, from
+    the stock URDF.  Approach frames on a can (2 cm radius) give force-closure grasps with
+    the thumb opposing the fingers in some, every contact on the can's side or ends, and
+    the closed hand clear of the can."""
+    robot = load_robot(ALEX)
+    h = robot.hands["right"]
+    assert h.kind == "pads" and len(h.finger_idx) == 5
+    can = trimesh.creation.cylinder(radius=0.02, height=0.11, sections=32)
+    hm = HandModel(robot, "right", can, disabled_pairs(robot, tmp_path).links(), 0.002)
+    pads = P.pad_geometry(hm)
+    rng = np.random.default_rng(0)
+    surface = build_surface(can, 0.002, rng)
+    frames = P.pad_frames(pads, can, surface, 200, rng)
+    grasps = [g for i, X in enumerate(frames)
+              if (g := P.pad_grasp(hm, pads, surface, X, i, 0.6, 0.06, GraspOptions())[0]) is not None]
+    assert len(grasps) >= 3 and any(g.in_contact[h.opposing] for g in grasps), [g.in_contact for g in grasps]
+    for g in grasps:
+        assert g.scores.epsilon > 0 and g.in_contact.sum() >= 2
+        p = g.points[g.in_contact]
+        side = np.abs(np.hypot(p[:, 0], p[:, 1]) - 0.02) < 2e-3
+        ends = np.abs(np.abs(p[:, 2]) - 0.055) < 2e-3
+        assert np.all(side | ends)
+        q = hm.q.copy()
+        q[h.idx] = g.finger_q
+        hm.set_object(g.X_OG)
+        assert not hm.collides(q, set(range(5)), None)
