@@ -366,6 +366,22 @@ def show(plan_file: Path, html_file: Path | None, png_dir: Path | None, fps: int
 
 
 @main.command()
+@click.argument("plan_file", metavar="PLAN", type=click.Path(path_type=Path))
+@click.option("-o", "--output", "outputs", type=click.Path(path_type=Path), multiple=True, metavar="FILE",
+              help="Write the samples to FILE, in the format its name asks for: .csv, .npz, .json, or "
+                   ".joint_trajectory.json (shaped like ROS trajectory_msgs/JointTrajectory).  Repeatable.")
+@click.option("--rate", type=float, default=100.0, show_default=True, help="Samples per second (Hz).")
+def export(plan_file: Path, outputs: tuple[Path, ...], rate: float) -> None:
+    """Sample a solved plan for a controller: every joint's position, velocity and
+    acceleration at a fixed rate, with the phase, the holding hands and grasps, the
+    object's pose and the gripper events."""
+    from regrasp_cli.commands.export import run_export
+
+    for path in run_export(plan_file, outputs, rate):
+        click.echo(f"samples: {path}")
+
+
+@main.command()
 @click.argument("folder", metavar="DIR", type=click.Path(path_type=Path), required=False)
 @click.option("--force", is_flag=True, help="Overwrite files already in DIR.")
 def examples(folder: Path | None, force: bool) -> None:

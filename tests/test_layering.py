@@ -41,11 +41,11 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("roadmap.*",),
     ("trajectory", "replay", "artefacts"),
     ("manip.*", "dexterous.*", "validate", "validate_inhand"),
-    ("show.*", "bench.*"),
+    ("show.*", "bench.*", "export"),
     ("commands.*", "cli"),
 )
 LAYER_NAMES = ("L0 core", "L1 model/grasp/scene/motion", "L2 roadmap", "L3 plan format/replay/artefacts",
-               "L4 planner/validator", "L5 show/bench", "L6 commands/cli")
+               "L4 planner/validator", "L5 show/bench/export", "L6 commands/cli")
 
 # (importer, importer may not import this module or anything under it, unless it is one of these)
 FORBIDDEN: tuple[tuple[str, str, tuple[str, ...], str], ...] = (
@@ -54,6 +54,7 @@ FORBIDDEN: tuple[tuple[str, str, tuple[str, ...], str], ...] = (
     ("validate_inhand", "dexterous", (), "the validator is independent of the planner"),
     ("validate", "dexterous", (), "the validator is independent of the planner"),
     ("show.*", "validate", (), "the viewer replays plans (replay.py) without the validator"),
+    ("export", "manip", ("manip.modes",), "the export samples the plan file, not the planner"),
 )
 
 CLI_MODULES = ("commands.*", "cli")  # the only modules that may print with rich or use click

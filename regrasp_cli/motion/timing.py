@@ -245,7 +245,15 @@ def _check_times(times, w: np.ndarray, c_v: np.ndarray, c_a: np.ndarray) -> np.n
 
 
 def evaluate_trajectory(waypoints, times, v_max, a_max, t) -> tuple[np.ndarray, np.ndarray]:
-    """Positions and velocities of the stop-at-every-waypoint trajectory at times t.
+    """Positions and velocities of the stop-at-every-waypoint trajectory at times t
+    (:func:`evaluate_with_accelerations`, without the accelerations)."""
+    q, qd, _ = evaluate_with_accelerations(waypoints, times, v_max, a_max, t)
+    return q, qd
+
+
+def evaluate_with_accelerations(waypoints, times, v_max, a_max, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions, velocities and accelerations of the stop-at-every-waypoint trajectory at
+    times t.
 
     Args:
         waypoints: (n, d) configurations (rad or m).
@@ -257,8 +265,9 @@ def evaluate_trajectory(waypoints, times, v_max, a_max, t) -> tuple[np.ndarray, 
             trajectory rests at its end waypoints outside).
 
     Returns:
-        q (m, d) positions and qd (m, d) velocities (rad/s or m/s).  At a waypoint time
-        the position is exactly that waypoint and the velocity is zero.
+        q (m, d) positions, qd (m, d) velocities (rad/s or m/s) and qdd (m, d)
+        accelerations (rad/s^2 or m/s^2; on a ramp's ends, the ramp's).  At a waypoint
+        time the position is exactly that waypoint and the velocity is zero.
     """
     w = _waypoints(waypoints)
     v, a = _limits(v_max, a_max, w.shape[1])
@@ -273,7 +282,7 @@ def evaluate_trajectory(waypoints, times, v_max, a_max, t) -> tuple[np.ndarray, 
         raise ValueError(f"t: expected finite times of shape (m,), got shape {tq.shape}")
     m, d = tq.shape[0], w.shape[1]
     if w.shape[0] == 1:
-        return np.repeat(w, m, axis=0), np.zeros((m, d))
+        return np.repeat(w, m, axis=0), np.zeros((m, d)), np.zeros((m, d))
 
     durations = np.diff(tt)
     zero = c_v == 0.0
@@ -287,11 +296,12 @@ def evaluate_trajectory(waypoints, times, v_max, a_max, t) -> tuple[np.ndarray, 
         s = np.where(up, V * tau * tau / (2.0 * R), V * (tau - 0.5 * R))
         u = np.where(down, V * back * back / (2.0 * R), 1.0 - s)  # 1 - s, exact near the end
         sd = np.where(up, V * tau / R, np.where(down, V * back / R, V))
+        sdd = np.where(up, V / R, np.where(down, -V / R, 0.0))
     s = np.where(down, 1.0 - u, s)
-    s, u, sd = (np.where(zero[k], z, x) for x, z in ((s, 0.0), (u, 1.0), (sd, 0.0)))
+    s, u, sd, sdd = (np.where(zero[k], z, x) for x, z in ((s, 0.0), (u, 1.0), (sd, 0.0), (sdd, 0.0)))
     first_half = (s <= 0.5)[:, None]
     q = np.where(first_half, w[k] + s[:, None] * dq[k], w[k + 1] - u[:, None] * dq[k])
-    return q, sd[:, None] * dq[k]
+    return q, sd[:, None] * dq[k], sdd[:, None] * dq[k]
 
 
 def sample_trajectory(waypoints, times, v_max, a_max, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
