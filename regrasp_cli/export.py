@@ -4,7 +4,9 @@ The timed motion of a solved plan (:mod:`regrasp_cli.trajectory`) at a fixed rat
 sample its time, every joint's position, velocity and acceleration, the phase, the hands
 holding the object with their grasp ids, and the object's pose X_WO (where
 :func:`regrasp_cli.replay.follow` puts it: at rest at its placement, held with the first
-holding hand's grasp, in-hand as the phase's object poses say); and the gripper events:
+holding hand's grasp, in-hand between the phase's object poses as docs/FORMAT.md says:
+the position linear and the rotation the slerp at the joints' fraction of each segment);
+and the gripper events:
 a hand's fingers closing on the object (``close``), opening off it (``open``) or moving
 on it (``inhand``), each over one phase.
 
@@ -111,10 +113,31 @@ def sample_plan(plan: Plan, file: Path, inputs: Inputs, rate: float, t: np.ndarr
                                                                   inputs.acceleration, t[at])
         else:
             q[at], qd[at], qdd[at] = trajectory(p.path(), p.timing, t[at])
-        X_WO[at] = [carries[k].X_WO(kin, x) for x in q[at]]
+        X_WO[at] = (moved_poses(p.waypoints, p.times, p.object_poses, t[at], q[at]) if p.object_poses is not None
+                    else [carries[k].X_WO(kin, x) for x in q[at]])
     phases = tuple({"name": p.name, "kind": p.kind.value, "holding": dict(p.holding), "touching": list(p.touching),
                     "t0": float(p.times[0]), "t1": float(p.times[-1])} for p in plan.phases)
     return Samples(float(rate), tuple(plan.joint_names), t, q, qd, qdd, phase, X_WO, phases, _events(plan))
+
+
+def moved_poses(waypoints: np.ndarray, times: np.ndarray, poses: np.ndarray, t: np.ndarray,
+                q: np.ndarray) -> np.ndarray:
+    """The object's poses (m, 4, 4) at times t (m,) of a phase that gives them per
+    waypoint (``poses`` (n, 4, 4), an in-hand phase), the joints then at q (m, nq): at the
+    fraction f of its segment the joints have gone, the position linear in f and the
+    rotation the slerp at f (docs/FORMAT.md, 4.3)."""
+    if len(waypoints) == 1:
+        return np.repeat(poses[:1], len(t), axis=0)
+    k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(waypoints) - 2)
+    dq = waypoints[k + 1] - waypoints[k]
+    dd = np.einsum("ij,ij->i", dq, dq)
+    f = np.clip(np.einsum("ij,ij->i", q - waypoints[k], dq) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
+    A, B = poses[k], poses[k + 1]
+    turn = Rotation.from_matrix(np.einsum("kji,kjl->kil", A[:, :3, :3], B[:, :3, :3])).as_rotvec()
+    out = np.tile(np.eye(4), (len(t), 1, 1))
+    out[:, :3, :3] = A[:, :3, :3] @ Rotation.from_rotvec(f[:, None] * turn).as_matrix()
+    out[:, :3, 3] = (1 - f)[:, None] * A[:, :3, 3] + f[:, None] * B[:, :3, 3]
+    return out
 
 
 # ------------------------------------------------------------------ files

@@ -2,7 +2,7 @@
 follow its section 4 formulas alone, reading the plan file with ``json`` (nothing of
 ``regrasp_cli.motion``), and give what `regrasp export` samples to 1e-9, on the default
 scene's plan (blended phases on speed grids, stop-at-every-waypoint phases) and an
-in-hand plan."""
+in-hand plan (the object's poses between waypoints too)."""
 
 from __future__ import annotations
 
@@ -89,6 +89,33 @@ def motion(d: dict, t: float):
     return blended_motion(w, np.array(p["blends"], float), p["timing"], t)
 
 
+# ------------------------------------------------------------------ FORMAT.md, section 4.3
+
+
+def inhand_pose(d: dict, t: float, q: np.ndarray) -> np.ndarray | None:
+    """The object's pose at t in a phase with ``object_poses`` (None in others)."""
+    starts = [p["times"][0] for p in d["phases"]]
+    p = d["phases"][min(max(int(np.searchsorted(starts, t, side="right")) - 1, 0), len(d["phases"]) - 1)]
+    if p.get("object_poses") is None:
+        return None
+    w, times, X = np.array(p["waypoints"]), np.array(p["times"]), np.array(p["object_poses"])
+    i = min(max(int(np.searchsorted(times, t, side="right")) - 1, 0), len(w) - 2)
+    dq = w[i + 1] - w[i]
+    f = float(np.clip((q - w[i]) @ dq / (dq @ dq), 0, 1)) if dq @ dq > 0 else 0.0
+    R = X[i, :3, :3].T @ X[i + 1, :3, :3]  # slerp: the rotation's angle scaled by f about its axis
+    angle = np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))
+    out = np.eye(4)
+    out[:3, 3] = (1 - f) * X[i, :3, 3] + f * X[i + 1, :3, 3]
+    if angle < 1e-12:
+        out[:3, :3] = X[i, :3, :3]
+        return out
+    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / (2 * np.sin(angle))
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    a = f * angle
+    out[:3, :3] = X[i, :3, :3] @ (np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * K @ K)
+    return out
+
+
 # ------------------------------------------------------------------ against the export
 
 
@@ -101,6 +128,8 @@ def _matches(path) -> int:
         assert np.abs(q - s.q[i]).max() < 1e-9, (i, s.t[i])
         assert np.abs(qd - s.qd[i]).max() < 1e-9, (i, s.t[i])
         assert np.abs(qdd - s.qdd[i]).max() < 1e-9, (i, s.t[i])
+        X = inhand_pose(d, float(s.t[i]), q)
+        assert X is None or np.abs(X - s.X_WO[i]).max() < 1e-9, (i, s.t[i])
     return len(s.t)
 
 
