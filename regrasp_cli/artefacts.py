@@ -103,7 +103,7 @@ def _read_grasp_list(path: Path, prov) -> GraspList:
 # ------------------------------------------------------------------ options
 
 
-def _positive(value, name: str) -> None:
+def check_positive(value, name: str) -> None:
     if value is not None and value < 1:
         raise InputError(None, name, f"expected an integer >= 1, found {value}")
 
@@ -114,7 +114,7 @@ def build_options(scene_seed: int, seed: int | None, jobs: int, positions: int |
 
 
     for value, name in ((jobs, "--jobs"), (positions, "--positions"), (orientations, "--orientations")):
-        _positive(value, name)
+        check_positive(value, name)
     options = BuildOptions(seed=scene_seed if seed is None else seed, jobs=jobs)
     g = options.grasp
     for value, name in ((target, "--target"), (pinch_frames, "--pinch-frames")):

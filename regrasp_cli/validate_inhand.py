@@ -22,7 +22,9 @@ phases' kinds, per-waypoint object poses and contacts:
   object;
 * **collision**: every segment sampled (the object's pose interpolated with the joints)
   against the hand itself and the object, fingertips touching it eroded by the plan's
-  contact tolerance.
+  contact tolerance; the lifted fingertip of a regrasp gets none: leaving its contact it
+  goes no deeper than it was there, between waypoints it stays out, arriving it goes no
+  deeper than it will be.
 """
 
 from __future__ import annotations
@@ -41,11 +43,11 @@ from regrasp_cli.model.collision import ObjectPlacement, collision_world
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.replay import Inputs
 from regrasp_cli.trajectory import Phase, Plan
-from regrasp_cli.validate import (CONE_EDGES, NORMAL_TOL, SURFACE_TOL, TIP_TOL, Issue, PhaseSummary,
-                                  ValidationReport, _pose_differs, _surface, continuity_issues, limit_issues,
-                                  phase_timing_issues)
+from regrasp_cli.checks import (CONE_EDGES, NORMAL_TOL, SURFACE_TOL, TIP_TOL, Issue, PhaseSummary, ValidationReport,
+                                continuity_issues, limit_issues, phase_timing_issues, pose_differs, surface_distance)
 
 STEP_M, STEP_RAD = 0.01, 0.1  # the object's largest move between two waypoints: more is a jump
+LIFT_TOL = 1e-5  # m: rounding of a lifted fingertip's distance to the object
 FINGER_TOL = 1e-9  # rad: joints that must not move
 
 
@@ -92,7 +94,7 @@ class _Checker:
     def on_surface(self, f: str, p: np.ndarray, n: np.ndarray) -> str | None:
         key = p.tobytes() + n.tobytes()
         if key not in self.surface:
-            d, normals = _surface(self.mesh, p)
+            d, normals = surface_distance(self.mesh, p)
             u = float(np.linalg.norm(n))
             msg = None
             if d > SURFACE_TOL:
@@ -121,7 +123,7 @@ class _Checker:
             out.append(Issue(phase.name, None, "kind", "joints other than the hand's fingers move (the wrist is "
                                                        "fixed in an in-hand plan)"))
         if previous is not None and previous.object_poses is not None and \
-                (off := _pose_differs(previous.object_poses[-1], X[0])):
+                (off := pose_differs(previous.object_poses[-1], X[0])):
             out.append(Issue(phase.name, 0, "continuity", f"the object jumps by {off} from the end of phase "
                                                           f"{previous.name}"))
         for i in range(1, len(X)):
@@ -149,8 +151,8 @@ class _Checker:
                     out.append(Issue(phase.name, i, "kind", "a contact moves on the object during a transfer"))
                     break
             return out
-        if _pose_differs(phase.object_poses[0], phase.object_poses[-1]) or any(
-                _pose_differs(phase.object_poses[0], x) for x in phase.object_poses):
+        if pose_differs(phase.object_poses[0], phase.object_poses[-1]) or any(
+                pose_differs(phase.object_poses[0], x) for x in phase.object_poses):
             out.append(Issue(phase.name, None, "kind", "the object moves during a regrasp"))
         if set(sets[0]) != everyone or set(sets[-1]) != everyone:
             out.append(Issue(phase.name, 0, "kind", "a regrasp starts and ends with every finger touching"))
@@ -193,19 +195,41 @@ class _Checker:
                 centre = self.kin.fk(q[i], hand.tip_frames[j])[:3, 3]
                 c_O = (np.linalg.inv(X[i]) @ np.r_[centre, 1.0])[:3]
                 clear = -float(trimesh.proximity.signed_distance(self.mesh, c_O[None])[0])
-                if clear < hand.spec.fingers[j].tip_radius - self.inputs.options.contact_tolerance:
+                if clear < hand.spec.fingers[j].tip_radius - LIFT_TOL:
                     return [Issue(phase.name, i, "grasp", f"the lifted {f} fingertip touches the object")]
         return out
+
+    def tip_clearance(self, phase: Phase, j: int, qs: np.ndarray, Xs: np.ndarray) -> np.ndarray:
+        """Distance (k,) from fingertip ``j``'s sphere of the touching hand to the object's
+        surface at the configurations ``qs`` (k, nq), the object at ``Xs`` (k, 4, 4):
+        negative inside (m)."""
+        hand = self.robot.hands[phase.touching[0]]
+        c_W = np.array([self.kin.fk(q, hand.tip_frames[j])[:3, 3] for q in qs])
+        c_O = np.einsum("kji,kj->ki", Xs[:, :3, :3], c_W - Xs[:, :3, 3])
+        return -trimesh.proximity.signed_distance(self.mesh, c_O) - hand.spec.fingers[j].tip_radius
+
+    def lifted(self, phase: Phase) -> int | None:
+        """The finger (index in its hand) that a regrasp phase lifts, or None."""
+        if phase.kind is not Kind.INHAND_REGRASP or phase.contacts is None or len(phase.waypoints) < 3:
+            return None
+        names = self.fingers(phase.touching[0])
+        away = set(names) - {c["finger"] for c in phase.contacts[1]}
+        return names[away.pop()] if len(away) == 1 else None
 
     def collisions(self, phase: Phase, resolution: float) -> tuple[list[Issue], int]:
         q, X = phase.waypoints, phase.object_poses
         obj = ObjectPlacement(self.mesh, X[0], None, tuple(phase.touching))
         world = collision_world(self.robot, self.inputs.obstacles, self.inputs.disabled, obj, self.inputs.options)
         n = 0
+        f = self.lifted(phase)
+        if f is not None:  # where it lets go and where it touches again
+            ends = self.tip_clearance(phase, f, q[[0, -1]], X[[0, -1]])
         for i in range(len(q)):
             steps = 1 if i == 0 else max(1, int(np.ceil(np.abs(q[i] - q[i - 1]).max() / resolution)))
             ts = np.arange(1, steps + 1) / steps
             Xs = segment_poses(X[max(i - 1, 0)], X[i], ts)
+            if f is not None and i > 0 and (issue := self._lifted_clear(phase, f, ends, i, ts, Xs)):
+                return [issue], n
             for s, X_s in zip(ts, Xs):
                 qs = q[i] if i == 0 else q[i - 1] + s * (q[i] - q[i - 1])
                 world.set_object_pose(X_s)
@@ -215,6 +239,27 @@ class _Checker:
                     return [Issue(phase.name, i, "collision", f"collision ({pairs}) between waypoints {max(i - 1, 0)} "
                                                               f"and {i}")], n
         return [], n
+
+
+    def _lifted_clear(self, phase: Phase, f: int, ends: np.ndarray, i: int, ts: np.ndarray,
+                      Xs: np.ndarray) -> Issue | None:
+        """The lifted fingertip ``f`` on the segment to waypoint ``i`` (samples ``ts``, object
+        poses ``Xs``): the contact tolerance lets a touching fingertip into the object, a
+        lifted one gets none.  Leaving its contact it goes no deeper than it was there
+        (``ends[0]``), between, not in at all, arriving, no deeper than it will be
+        (``ends[1]``); :data:`LIFT_TOL` for rounding."""
+        q, last = phase.waypoints, len(phase.waypoints) - 1
+        keep = ts < 1.0 if i == last else np.ones(len(ts), dtype=bool)  # the contact itself is a grasp
+        if not keep.any():
+            return None
+        floor = min(0.0, ends[0] if i == 1 else 0.0, ends[1] if i == last else 0.0) - LIFT_TOL
+        qs = q[i - 1] + ts[keep, None] * (q[i] - q[i - 1])
+        depth = self.tip_clearance(phase, f, qs, Xs[keep])
+        if depth.min() < floor:
+            name = self.robot.hands[phase.touching[0]].spec.fingers[f].name
+            return Issue(phase.name, i, "collision", f"the lifted {name} fingertip goes {-depth.min() * 1000:.3g} mm "
+                                                     f"into the object between waypoints {i - 1} and {i}")
+        return None
 
 
 def validate_inhand(plan: Plan, path: Path, inputs: Inputs, resolution: float, dt: float) -> ValidationReport:
@@ -243,7 +288,7 @@ def validate_inhand(plan: Plan, path: Path, inputs: Inputs, resolution: float, d
             issues.append(Issue(None, None, "attachment", f"an in-hand plan records the object's {pid} pose in "
                                                           f"placements[] (id {shown(pid)})"))
         elif plan.phases and plan.phases[k].object_poses is not None and \
-                (off := _pose_differs(plan.phases[k].object_poses[i], placement.X_WO)):
+                (off := pose_differs(plan.phases[k].object_poses[i], placement.X_WO)):
             issues.append(Issue(plan.phases[k].name, None, "attachment", f"the object is {off} away from its {pid} "
                                                                          "pose"))
     if not plan.phases:

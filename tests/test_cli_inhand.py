@@ -204,3 +204,31 @@ def test_progress_counts_every_expansion_of_every_tree(cache_dir, planned):
     assert calls == [(k, problem.spec.planning.nodes) for k in range(1, n + 1)]
     _, d = planned
     assert d["stats"]["iterations"] == n
+
+
+def test_validate_rejects_a_lifted_fingertip_that_grazes_the_object(tmp_path, planned):
+    """Issue 42: a fingertip that has let go gets no contact tolerance.  The stepping
+    finger's first lifted waypoint put back 1 mm into the ball (by the finger's IK) was
+    accepted while every fingertip of the touching hand could enter it by 2 mm."""
+    from regrasp_cli.model.ik import finger_ik
+    from regrasp_cli.model.robot import load_robot
+
+    out, d = planned
+    robot = load_robot(ROOT / "regrasp_cli" / "data" / "robots" / "hand4" / "robot.yaml")
+    k = next(k for k, p in enumerate(d["phases"]) if p["kind"] == "inhand-regrasp" and len(p["waypoints"]) >= 4)
+    p = d["phases"][k]
+    hand = p["touching"][0]
+    names = [f.name for f in robot.hands[hand].spec.fingers]
+    lifted = (set(names) - {c["finger"] for c in p["contacts"][1]}).pop()
+    f = names.index(lifted)
+    c = next(c for c in p["contacts"][0] if c["finger"] == lifted)
+    r = robot.hands[hand].spec.fingers[f].tip_radius
+    X = np.array(p["object_poses"][0])
+    target = X[:3, :3] @ (np.array(c["point"]) + (r - 0.001) * np.array(c["normal"])) + X[:3, 3]
+    ik = finger_ik(robot, hand, f, target, np.array(p["waypoints"][1]), np.random.default_rng(0))
+    assert ik.success
+
+    def edit(d):
+        d["phases"][k]["waypoints"][1] = [float(x) for x in ik.q]
+    issues = _tampered(tmp_path, d, edit)
+    assert any("lifted" in i.message and lifted in i.message for i in issues), issues

@@ -20,7 +20,7 @@ from conftest import ROOT
 from regrasp_cli.artefacts import QuietBuilder
 from regrasp_cli.dexterous.gait import GaitOptions
 from regrasp_cli.dexterous.multiquery import LearnOptions
-from regrasp_cli.dexterous.roadmap import RoadmapOptions
+from regrasp_cli.dexterous.roadmap import GaitTreeOptions
 from regrasp_cli.dexterous.task import inhand_roadmap, load_inhand_problem, roadmap_path, roadmap_provenance
 from regrasp_cli.motion.blend import blended_path, time_optimal
 from regrasp_cli.validate import validate_plan
@@ -164,7 +164,7 @@ class _Told(QuietBuilder):
 def test_a_damaged_roadmap_is_learned_again_with_a_line_saying_why(tmp_path, cache_dir):
     problem = load_inhand_problem(SCENE, cache_dir)
     o = LearnOptions(roots=2)
-    r = replace(RoadmapOptions(), step_rad=problem.spec.planning.step_rad)  # as inhand_roadmap reads them
+    r = replace(GaitTreeOptions(), step_rad=problem.spec.planning.step_rad)  # as inhand_roadmap reads them
     g = GaitOptions(gait_m=problem.spec.planning.gait_m)
     path = roadmap_path(tmp_path, problem, roadmap_provenance(problem, o, r, g))
     path.parent.mkdir(parents=True)

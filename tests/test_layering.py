@@ -16,7 +16,9 @@ Rules:
 (d) a package's ``__init__`` runs whenever any module under it is imported, so it imports
     only what its lowest-layer module may (e.g. ``manip/__init__`` as ``manip.modes``);
 (e) every ``regrasp_cli`` import names a module that exists (lazy imports inside
-    functions are not exercised by importing the package).
+    functions are not exercised by importing the package);
+(f) no module imports another's private name (``from m import _x`` or ``m._x``);
+(g) no import cycle, imports inside functions included (issue 42).
 
 ``test_checker_*`` run the checker on tiny synthetic sources with known bad edges, so
 that the rules cannot pass vacuously.
@@ -40,7 +42,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("model.*", "grasp.*", "placement.*", "scene", "motion.*"),
     ("roadmap.*",),
     ("trajectory", "replay", "artefacts"),
-    ("manip.*", "dexterous.*", "validate", "validate_inhand"),
+    ("manip.*", "dexterous.*", "checks", "validate", "validate_inhand"),
     ("show.*", "bench.*", "export"),
     ("commands.*", "cli"),
 )
@@ -50,6 +52,8 @@ LAYER_NAMES = ("L0 core", "L1 model/grasp/scene/motion", "L2 roadmap", "L3 plan 
 # (importer, importer may not import this module or anything under it, unless it is one of these)
 FORBIDDEN: tuple[tuple[str, str, tuple[str, ...], str], ...] = (
     ("validate", "manip", ("manip.modes",), "the validator is independent of the planner"),
+    ("checks", "manip", ("manip.modes",), "the validator is independent of the planner"),
+    ("checks", "dexterous", (), "the validator is independent of the planner"),
     ("validate_inhand", "manip", ("manip.modes",), "the validator is independent of the planner"),
     ("validate_inhand", "dexterous", (), "the validator is independent of the planner"),
     ("validate", "dexterous", (), "the validator is independent of the planner"),
@@ -217,6 +221,46 @@ def dangling(sources: dict[str, str]) -> list[str]:
     return [f"{e}  (no such module)" for e in edges_of(sources) if ours(e.imported) and e.imported not in known]
 
 
+def private_imports(sources: dict[str, str]) -> list[str]:
+    """Rule (f): no module imports another module's private name (``from m import _x``,
+    or ``m._x`` of a module imported as ``m``): what two modules share is public."""
+    known = modules_of(sources)
+    bad = []
+    for path, text in sources.items():
+        module, is_package = module_of(path)
+        aliases = {}  # local name -> our module, for attribute access
+        tree = ast.parse(text, filename=path)
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module != "__future__":
+                base = _absolute(module, is_package, node.level, node.module)
+                for a in node.names:
+                    sub = f"{base}.{a.name}"
+                    if sub in known:
+                        aliases[a.asname or a.name] = sub
+                    elif ours(base) and base != module and a.name.startswith("_") and not a.name.startswith("__"):
+                        bad.append(f"{path}:{node.lineno}: {module} imports {base}.{a.name}")
+            elif isinstance(node, ast.Import):
+                for a in node.names:
+                    if ours(a.name) and a.asname:
+                        aliases[a.asname] = a.name
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases
+                    and node.attr.startswith("_") and not node.attr.startswith("__")):
+                bad.append(f"{path}:{node.lineno}: {module} uses {aliases[node.value.id]}.{node.attr}")
+    return sorted(bad)
+
+
+def import_cycles(sources: dict[str, str]) -> list[str]:
+    """Rule (g): no two modules import each other, directly or through others (imports
+    inside functions count: they are a dependency all the same)."""
+    import networkx as nx
+
+    known = modules_of(sources)
+    g = nx.DiGraph((e.importer, e.imported) for e in edges_of(sources)
+                   if e.imported in known and e.importer != e.imported)
+    return [" -> ".join(sorted(c)) for c in nx.strongly_connected_components(g) if len(c) > 1]
+
+
 def report(title: str, lines: list[str]) -> str:
     return f"{title} ({len(lines)}):\n  " + "\n  ".join(lines)
 
@@ -245,6 +289,16 @@ def test_no_module_imports_a_higher_layer(sources):
 def test_library_modules_do_not_import_rich_click_or_the_command_layer(sources):
     bad = ui_violations(sources)
     assert not bad, report("library modules importing rich/click/commands/cli (importer -> imported)", bad)
+
+
+def test_no_module_imports_another_s_private_names(sources):
+    bad = private_imports(sources)
+    assert not bad, report("private names used across modules (make them public, or keep them home)", bad)
+
+
+def test_no_import_cycles(sources):
+    bad = import_cycles(sources)
+    assert not bad, report("modules importing each other (strongly connected sets)", bad)
 
 
 def test_allowed_exceptions_are_still_used(sources):
@@ -337,3 +391,26 @@ def test_checker_reports_a_package_init_importing_above_its_lowest_module():
 def test_checker_reports_imports_of_missing_modules():
     bad = dangling(dict(SYNTHETIC, **{"regrasp_cli/scene.py": "from regrasp_cli.plan.command import x\n"}))
     assert bad == ["regrasp_cli/scene.py:1: regrasp_cli.scene -> regrasp_cli.plan.command  (no such module)"]
+
+
+def test_checker_reports_private_names_across_modules():
+    extra = dict(SYNTHETIC, **{
+        "regrasp_cli/placement/a.py": "from regrasp_cli.placement.b import _helper, public\nfrom . import b as bee\n"
+                                      "def f():\n    return bee._other(), _mine()\ndef _mine():\n    pass\n",
+        "regrasp_cli/placement/b.py": "def _helper():\n    pass\n",
+        "regrasp_cli/placement/__init__.py": ""})
+    bad = private_imports(extra)
+    assert bad == ["regrasp_cli/placement/a.py:1: regrasp_cli.placement.a imports regrasp_cli.placement.b._helper",
+                   "regrasp_cli/placement/a.py:4: regrasp_cli.placement.a uses regrasp_cli.placement.b._other"]
+    assert not private_imports(SYNTHETIC)
+
+
+def test_checker_reports_import_cycles_through_function_level_imports():
+    extra = dict(SYNTHETIC, **{
+        "regrasp_cli/placement/a.py": "from regrasp_cli.placement import b\n",
+        "regrasp_cli/placement/b.py": "def f():\n    from regrasp_cli.placement.c import g\n",
+        "regrasp_cli/placement/c.py": "import regrasp_cli.placement.a\n",
+        "regrasp_cli/placement/__init__.py": ""})
+    cycles = import_cycles(extra)
+    assert "regrasp_cli.placement.a -> regrasp_cli.placement.b -> regrasp_cli.placement.c" in cycles
+    assert not any("placement" in c for c in import_cycles(SYNTHETIC))

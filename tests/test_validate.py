@@ -38,7 +38,8 @@ from regrasp_cli.replay import Carry
 from regrasp_cli.spatial import inverse
 from regrasp_cli.store import sha256_file
 from regrasp_cli.trajectory import Phase, Placement, Plan, PlanGrasp, plan_to_dict, write_plan
-from regrasp_cli.validate import ValidationReport, timing_issues, validate_plan
+from regrasp_cli.checks import ValidationReport, timing_issues
+from regrasp_cli.validate import validate_plan
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT_DIR = ROOT / "configs" / "robots" / "humanoid43"

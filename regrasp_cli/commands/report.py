@@ -10,7 +10,7 @@ from rich.console import Console
 from rich.table import Table
 
 from regrasp_cli.model.reach import Reach, reach
-from regrasp_cli.artefacts import _positive, build_grasp_list, build_options, roadmap_options
+from regrasp_cli.artefacts import check_positive, build_grasp_list, build_options, roadmap_options
 from regrasp_cli.commands.progress import load_problem_shown
 from regrasp_cli.scene import Problem
 
@@ -244,7 +244,7 @@ def run_roadmap_build(scene: Path, cache_dir: Path, nodes: int, tree: bool, seed
     from regrasp_cli.config import load_scene_spec
 
     options = roadmap_options(load_scene_spec(scene), nodes, tree, seed)
-    _positive(jobs, "--jobs")
+    check_positive(jobs, "--jobs")
     build_roadmap_shown(scene, cache_dir, options, jobs, console or Console())
 
 

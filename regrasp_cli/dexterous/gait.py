@@ -17,7 +17,9 @@ tangent plane, moves to where the finger, opened the same way, is as clear over 
 contact, and closes on it: three
 straight joint-space segments, each checked for collisions of that finger (with the
 object, the palm and the other fingers) every ``check_rad``; higher lifts are tried when
-a lower one collides.
+a lower one collides.  The collision checks let fingertips into the object by the contact
+tolerance; the lifted fingertip gets none (:func:`lifts_clear`): opening a finger can
+drag its tip through the surface before it rises.
 
 Frames: the grasp frame G (fixed), the object frame O; metres, radians.
 """
@@ -28,10 +30,15 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 
 from regrasp_cli.dexterous.gsn import GsConfig, GsScratch
 from regrasp_cli.dexterous.hand import reach, tip_targets
 from regrasp_cli.dexterous.transfer import interpolate
+
+
+LIFT_TOL = 1e-5  # m: rounding of a lifted fingertip's distance to the object (lifts_clear)
+OFF_M = 0.001  # m: a stepping fingertip first moves this far straight off its contact, and last onto the new one
 
 
 @dataclass(frozen=True)
@@ -99,19 +106,58 @@ def _segment_free(s: GsScratch, q_a: np.ndarray, q_b: np.ndarray, finger: int, c
     return True
 
 
+def tip_clearance(s: GsScratch, qs: np.ndarray, f: int, X_WO: np.ndarray) -> np.ndarray:
+    """Distance (k,) from finger ``f``'s fingertip sphere to the object's surface at the
+    configurations ``qs`` (k, nq), the object at ``X_WO`` (4, 4): negative inside (m),
+    the mesh's signed distance as the validator measures it (an approximation, the
+    tangent plane of the nearest surface sample, let 0.1 mm through on a ball)."""
+    tip = s.hm.hand.tip_frames[f]
+    c_W = np.array([s.kin.fk(q, tip)[:3, 3] for q in qs])
+    c_O = (c_W - X_WO[:3, 3]) @ X_WO[:3, :3]
+    return -trimesh.proximity.signed_distance(s.surface.mesh, c_O) - s.hand.radii[f]
+
+
+def lifts_clear(s: GsScratch, qs: list[np.ndarray], f: int, X_WO: np.ndarray, step_rad: float) -> bool:
+    """Does finger ``f`` stay off the object from where it lets go (``qs[0]``) to where it
+    touches again (``qs[-1]``), along the straight segments between ``qs``, sampled every
+    ``step_rad``?  The contact tolerance lets a touching fingertip into the object; a
+    lifted one gets none: leaving, it goes no deeper than it was at its contact, between,
+    not in at all, arriving, no deeper than it will be (:data:`LIFT_TOL` for rounding)."""
+    ends = tip_clearance(s, np.array([qs[0], qs[-1]]), f, X_WO)
+    last = len(qs) - 2
+    for i, (a, b) in enumerate(zip(qs, qs[1:])):
+        k = max(1, int(np.ceil(np.abs(b - a).max() / step_rad)))
+        t = np.linspace(0.0, 1.0, k + 1)[1:-1] if i == last else np.linspace(0.0, 1.0, k + 1)[1:]
+        floor = min(0.0, ends[0] if i == 0 else 0.0, ends[1] if i == last else 0.0) - LIFT_TOL
+        if len(t) and tip_clearance(s, a + t[:, None] * (b - a), f, X_WO).min() < floor:
+            return False
+    return True
+
+
+def _off(s: GsScratch, q: np.ndarray, f: int, X_WO: np.ndarray, p_O: np.ndarray, n_O: np.ndarray,
+         rng: np.random.Generator) -> np.ndarray | None:
+    """Finger ``f`` moved from ``q`` so that its fingertip is :data:`OFF_M` straight off its
+    contact (``p_O``, ``n_O``, object frame) along the normal, by IK; None when it cannot."""
+    centre = X_WO[:3, :3] @ (p_O + (s.hand.radii[f] + OFF_M) * n_O) + X_WO[:3, 3]
+    targets = np.zeros((len(s.hand.fingers), 3))
+    targets[f] = centre
+    return reach(s.hand, q, targets, rng, fingers=(f,), restarts=0, tol=0.1 * OFF_M, kin=s.kin)
+
+
 def _lifted(s: GsScratch, q: np.ndarray, f: int, X_WO: np.ndarray, p_O: np.ndarray, n_O: np.ndarray,
-            h: float, rng: np.random.Generator) -> np.ndarray | None:
+            h: float, rng: np.random.Generator, opened: bool = True) -> np.ndarray | None:
     """Finger ``f`` moved from ``q`` so that its fingertip is ``h`` off the contact's
     tangent plane (``p_O``, ``n_O``, object frame): opened (its joints towards the hand's
-    open values), or by IK straight off along the normal, or off and back towards the
-    finger's base (a stretched finger cannot go straight); None when none clears."""
+    open values; not tried without ``opened``), or by IK straight off along the normal, or
+    off and back towards the finger's base (a stretched finger cannot go straight); None
+    when none clears."""
     idx, tip = s.hm.hand.finger_idx[f], s.hm.hand.tip_frames[f]
     p_W, n_W = X_WO[:3, :3] @ p_O + X_WO[:3, 3], X_WO[:3, :3] @ n_O
     r = s.hand.radii[f]
     centre = p_W + r * n_W
     root = s.X_WG[:3, :3] @ s.workspaces[f].root + s.X_WG[:3, 3]
     back = (root - centre) / max(np.linalg.norm(root - centre), 1e-9)
-    for t in np.linspace(0.05, 1.0, 20):  # opened: forward kinematics only, the cheapest
+    for t in np.linspace(0.05, 1.0, 20) if opened else ():  # opened: forward kinematics only, the cheapest
         q_t = q.copy()
         q_t[idx] = (1 - t) * q[idx] + t * s.hm.q[idx]
         if (s.kin.fk(q_t, tip)[:3, 3] - p_W) @ n_W - r >= h:
@@ -157,21 +203,29 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     if s.finger_collides(down, f):  # every lift's last segment ends there
         return None
     for h in o.lifts_m:
-        # a node's finger is lifted at each step it tries
-        up_a = s.memoised(("lifted", c.q.tobytes(), c.X_GO.tobytes(), c.p[f].tobytes(), c.n[f].tobytes(), f, h),
-                          lambda: _lifted(s, c.q, f, X_WO, c.p[f], c.n[f], h, rng))
-        up_b = _lifted(s, down, f, X_WO, p[f], n[f], h, rng)
-        if up_a is None or up_b is None:
-            continue
-        qs = [c.q, up_a, up_b, down]
-        segments = list(zip(qs, qs[1:]))
-        # coarse first (most tries fail), then as finely as the validator: a distal link
-        # can graze a face between coarse checks
-        if all(_segment_free(s, a, b, f, o.check_rad) for a, b in segments) and \
-                all(_segment_free(s, a, b, f, o.confirm_rad) for a, b in segments):
-            # the quick gate above lets through grasps at the very boundary of closure,
-            # which the validator (epsilon over its margin) refuses: the step kept is exact
-            return Regrasp(f, np.array(qs), c, GsConfig(c.X_GO, p, n, down)) if s.closed(c.p, c.n, f) else None
+        for opened in (True, False):  # opening can drag the tip through the surface: then off along the normal
+            # a node's finger is lifted at each step it tries
+            up_a = s.memoised(("lifted", c.q.tobytes(), c.X_GO.tobytes(), c.p[f].tobytes(), c.n[f].tobytes(), f, h,
+                               opened), lambda: _lifted(s, c.q, f, X_WO, c.p[f], c.n[f], h, rng, opened))
+            up_b = _lifted(s, down, f, X_WO, p[f], n[f], h, rng, opened)
+            if up_a is None or up_b is None:
+                break
+            # straight off each contact first: a joint-space line from a touching tip curves
+            # and can graze the surface; a millimetre-long one off along the normal does not
+            off_a = s.memoised(("off", c.q.tobytes(), c.X_GO.tobytes(), c.p[f].tobytes(), c.n[f].tobytes(), f),
+                               lambda: _off(s, c.q, f, X_WO, c.p[f], c.n[f], rng))
+            off_b = _off(s, down, f, X_WO, p[f], n[f], rng)
+            qs = [c.q] + [x for x in (off_a, up_a, up_b, off_b) if x is not None] + [down]
+            segments = list(zip(qs, qs[1:]))
+            # coarse first (most tries fail), then as finely as the validator: a distal link
+            # can graze a face between coarse checks
+            if not (all(_segment_free(s, a, b, f, o.check_rad) for a, b in segments) and
+                    all(_segment_free(s, a, b, f, o.confirm_rad) for a, b in segments)):
+                break
+            if lifts_clear(s, qs, f, X_WO, o.confirm_rad):
+                # the quick gate above lets through grasps at the very boundary of closure,
+                # which the validator (epsilon over its margin) refuses: the step kept is exact
+                return Regrasp(f, np.array(qs), c, GsConfig(c.X_GO, p, n, down)) if s.closed(c.p, c.n, f) else None
     return None
 
 

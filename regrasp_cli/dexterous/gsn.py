@@ -37,7 +37,7 @@ import trimesh
 
 from regrasp_cli.dexterous.contacts import closed, closure, holds
 from regrasp_cli.dexterous.hand import InHand, reach, tip_targets
-from regrasp_cli.dexterous.surface import Surface, along, geodesic
+from regrasp_cli.dexterous.surface import MeshSurface, along, geodesic
 from regrasp_cli.dexterous.transfer import interpolate, poses_between
 from regrasp_cli.grasp.fingertips import grasp_for_frame
 from regrasp_cli.grasp.single import GraspOptions, HandModel
@@ -75,7 +75,7 @@ class GsScratch:
     triangulated one (geodesics)."""
 
     def __init__(self, hm: HandModel, workspaces: tuple[FingerWorkspace, ...], sampled: SampledSurface,
-                 surface: Surface, rho: float, options: GsOptions = GsOptions(),
+                 surface: MeshSurface, rho: float, options: GsOptions = GsOptions(),
                  grasp: GraspOptions = GraspOptions(candidates_per_finger=6), world: CollisionWorld | None = None):
         self.hm, self.workspaces, self.sampled, self.surface = hm, workspaces, sampled, surface
         self.world = world  # the scene's obstacles with the robot and the object (W), if any

@@ -13,7 +13,7 @@ kept either way; a grasp that does not join is dropped, so the graph is one conn
 component.
 
 A query (:func:`query`) joins the start grasp and a grasp at the goal pose the same way,
-but exploring as the single-query trees do (``RoadmapOptions.goal_bias`` of the
+but exploring as the single-query trees do (``GaitTreeOptions.goal_bias`` of the
 expansions aimed, the rest towards random poses: aimed joins failed on the cube), and
 follows the shortest route (the object's turn), each edge forwards or backwards
 (transfers and regrasps are reversible), cutting detours where a direct link goes.
@@ -33,7 +33,7 @@ from scipy.spatial.transform import Rotation
 
 from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp, Transfer, reversed_path
 from regrasp_cli.dexterous.gsn import GsConfig, GsScratch
-from regrasp_cli.dexterous.roadmap import RoadmapOptions, RoadmapStats, Tree, _distances, _random_pose, connect, \
+from regrasp_cli.dexterous.roadmap import GaitTreeOptions, RoadmapStats, Tree, pose_distances, random_pose, connect, \
     join_trees, rlg_sample
 
 
@@ -95,18 +95,18 @@ def turn(pieces: list[Piece]) -> float:
 
 
 def _random_grasp(s: GsScratch, p_GO: np.ndarray, rng: np.random.Generator, o: LearnOptions,
-                  r: RoadmapOptions) -> GsConfig | None:
+                  r: GaitTreeOptions) -> GsConfig | None:
     X = np.eye(4)
     X[:3, 3] = p_GO
     for _ in range(o.root_tries):
-        c = rlg_sample(s, _random_pose(X, 0.0, rng), rng, r.candidates)
+        c = rlg_sample(s, random_pose(X, 0.0, rng), rng, r.candidates)
         if c is not None:
             return c
     return None
 
 
 def _join(s: GsScratch, rm: GsRoadmap, main: Tree, ids: list[int], c: GsConfig, budget: int, aim: float,
-          rng: np.random.Generator, r: RoadmapOptions, g: GaitOptions, stats: RoadmapStats) -> int | None:
+          rng: np.random.Generator, r: GaitTreeOptions, g: GaitOptions, stats: RoadmapStats) -> int | None:
     """Join the grasp ``c`` to the roadmap: a tree from ``c`` and the roadmap's ``main``
     tree (``ids``: the roadmap node of each of its nodes) grown towards each other
     (:func:`roadmap.join_trees`).  The new nodes and edges go into ``rm`` and ``main``;
@@ -131,7 +131,7 @@ def _join(s: GsScratch, rm: GsRoadmap, main: Tree, ids: list[int], c: GsConfig, 
 
 
 def learn(s: GsScratch, p_GO: np.ndarray, rng: np.random.Generator, o: LearnOptions = LearnOptions(),
-          r: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions(),
+          r: GaitTreeOptions = GaitTreeOptions(), g: GaitOptions = GaitOptions(),
           progress=None) -> tuple[GsRoadmap, LearnStats]:
     """The learning phase with the object's centre at ``p_GO`` (3,), grasp frame: a
     roadmap from a grasp at a random orientation, to which ``o.roots`` more are joined in
@@ -157,7 +157,7 @@ def learn(s: GsScratch, p_GO: np.ndarray, rng: np.random.Generator, o: LearnOpti
 
 
 def query(s: GsScratch, rm: GsRoadmap, start: GsConfig, goal: GsConfig, rng: np.random.Generator,
-          o: LearnOptions = LearnOptions(), r: RoadmapOptions = RoadmapOptions(),
+          o: LearnOptions = LearnOptions(), r: GaitTreeOptions = GaitTreeOptions(),
           g: GaitOptions = GaitOptions()) -> tuple[list[Piece] | None, RoadmapStats, str]:
     """The pieces from ``start`` to ``goal`` over the roadmap (left as it is), or None and
     why not: each is joined to it as :func:`learn` joins a grasp (exploring: the aim is
@@ -184,7 +184,7 @@ def query(s: GsScratch, rm: GsRoadmap, start: GsConfig, goal: GsConfig, rng: np.
 
 
 def _shortcut(s: GsScratch, rm: GsRoadmap, route: list[int], rng: np.random.Generator, o: LearnOptions,
-              r: RoadmapOptions, g: GaitOptions) -> list[Piece]:
+              r: GaitTreeOptions, g: GaitOptions) -> list[Piece]:
     """The route's pieces, with detours cut: from each node, the farthest later node of
     the route within ``r.connect_rad`` is tried with :func:`roadmap.connect` (at most
     ``o.shortcuts`` tries in all).  A roadmap grown as trees joins two grasps through
@@ -192,7 +192,7 @@ def _shortcut(s: GsScratch, rm: GsRoadmap, route: list[int], rng: np.random.Gene
     poses = np.array([rm.nodes[i].X_GO for i in route])
     pieces, i, tries = [], 0, 0
     while i < len(route) - 1:
-        d = _distances(poses[i + 2:], poses[i], s.rho)
+        d = pose_distances(poses[i + 2:], poses[i], s.rho)
         near = np.nonzero(d <= r.connect_rad)[0]
         j = i + 1
         if near.size and tries < o.shortcuts:

@@ -48,7 +48,7 @@ FACING = 0.2  # cosine: a fingertip closes on its contact within 78 deg of its n
 
 
 @dataclass(frozen=True)
-class RoadmapOptions:
+class GaitTreeOptions:
     step_rad: float = 0.35  # object rotation per edge
     step_m: float = 0.01  # object translation per edge
     goal_bias: float = 0.5  # probability that the goal pose is the target
@@ -173,7 +173,7 @@ def comfort(s: GsScratch, c: GsConfig) -> float:
     return float(np.min(np.minimum(c.q[idx] - lo, hi - c.q[idx]) / (hi - lo)))
 
 
-def start_config(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, o: RoadmapOptions) -> GsConfig | None:
+def start_config(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, o: GaitTreeOptions) -> GsConfig | None:
     """The best of ``o.start_samples`` RLG samples at ``X_GO``: most fingers that may let
     go, then the finger joints farthest from their limits (room to gait)."""
     best, key = None, (-1, -1.0)
@@ -187,7 +187,7 @@ def start_config(s: GsScratch, X_GO: np.ndarray, rng: np.random.Generator, o: Ro
     return best
 
 
-def regrasp_one(s: GsScratch, c: GsConfig, rng: np.random.Generator, o: RoadmapOptions,
+def regrasp_one(s: GsScratch, c: GsConfig, rng: np.random.Generator, o: GaitTreeOptions,
                 g: GaitOptions) -> Regrasp | None:
     """One finger that may let go moves to a random new contact (§IV's regrasping path;
     the RLG sampling of that finger's contact), or None."""
@@ -218,7 +218,7 @@ def _turns(inside: np.ndarray) -> np.ndarray:
     return np.argmin(np.vstack([inside, np.zeros((1, inside.shape[1]), bool)]), axis=0)
 
 
-def aimed_regrasp(s: GsScratch, c: GsConfig, X_goal: np.ndarray, rng: np.random.Generator, o: RoadmapOptions,
+def aimed_regrasp(s: GsScratch, c: GsConfig, X_goal: np.ndarray, rng: np.random.Generator, o: GaitTreeOptions,
                   g: GaitOptions, ahead: int = 3) -> list[Piece] | None:
     """A finger that may let go steps to the contact that lets the object turn furthest
     towards ``X_goal`` with every fingertip inside its workspace (up to ``ahead`` edges
@@ -291,7 +291,7 @@ def _distance(X_a: np.ndarray, X_b: np.ndarray, rho: float) -> float:
     return Rotation.from_matrix(X_a[:3, :3].T @ X_b[:3, :3]).magnitude() + np.linalg.norm(X_b[:3, 3] - X_a[:3, 3]) / rho
 
 
-def _distances(X_a: np.ndarray, X_b: np.ndarray, rho: float) -> np.ndarray:
+def pose_distances(X_a: np.ndarray, X_b: np.ndarray, rho: float) -> np.ndarray:
     """:func:`_distance` from each pose of ``X_a`` (k, 4, 4) to ``X_b`` (4, 4), at once: the
     angle from the chord, ``|R_a - R_b|_F = 2 sqrt(2) sin(angle / 2)`` (exact near 0)."""
     chord = np.linalg.norm(X_a[:, :3, :3] - X_b[:3, :3], axis=(1, 2))
@@ -299,7 +299,7 @@ def _distances(X_a: np.ndarray, X_b: np.ndarray, rho: float) -> np.ndarray:
     return angle + np.linalg.norm(X_a[:, :3, 3] - X_b[:3, 3], axis=1) / rho
 
 
-def _random_pose(X_start: np.ndarray, box: float, rng: np.random.Generator) -> np.ndarray:
+def random_pose(X_start: np.ndarray, box: float, rng: np.random.Generator) -> np.ndarray:
     X = np.eye(4)
     X[:3, :3] = Rotation.random(random_state=rng).as_matrix()
     X[:3, 3] = X_start[:3, 3] + rng.uniform(-box, box, 3)
@@ -307,7 +307,7 @@ def _random_pose(X_start: np.ndarray, box: float, rng: np.random.Generator) -> n
 
 
 def _expand(s: GsScratch, a: GsConfig, target: np.ndarray, to_goal: bool, rng: np.random.Generator,
-            o: RoadmapOptions, g: GaitOptions) -> list[Piece] | None:
+            o: GaitTreeOptions, g: GaitOptions) -> list[Piece] | None:
     """Towards ``target``: slide the contacts (the GS_n path; first towards the goal, the
     fingers staying where they are), or carry the object with them fixed (towards the goal
     by each fraction of an edge in ``o.goal_carries`` in turn); when neither goes, one
@@ -335,11 +335,11 @@ def _expand(s: GsScratch, a: GsConfig, target: np.ndarray, to_goal: bool, rng: n
 
 
 def _extend(s: GsScratch, tree: Tree, target: np.ndarray, to_goal: bool, goal_fails: dict[int, int],
-            rng: np.random.Generator, o: RoadmapOptions, g: GaitOptions) -> int | None:
+            rng: np.random.Generator, o: GaitTreeOptions, g: GaitOptions) -> int | None:
     """Expand the tree's node nearest ``target`` (towards the goal: of those that failed it
     less than twice; ties, a regrasp keeping the pose, broken at random) and add the node
     it reaches: its index, or None.  ``goal_fails`` counts the failures towards the goal."""
-    d = _distances(np.array([c.X_GO for c in tree.nodes]), target, s.rho) + 1e-9 * rng.random(len(tree.nodes))
+    d = pose_distances(np.array([c.X_GO for c in tree.nodes]), target, s.rho) + 1e-9 * rng.random(len(tree.nodes))
     if to_goal:
         d[[k for k, n in goal_fails.items() if n >= 2]] = np.inf
         if np.isinf(d).all():
@@ -354,7 +354,7 @@ def _extend(s: GsScratch, tree: Tree, target: np.ndarray, to_goal: bool, goal_fa
 
 
 def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Generator,
-         o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions(),
+         o: GaitTreeOptions = GaitTreeOptions(), g: GaitOptions = GaitOptions(),
          progress: Callable[[], None] | None = None) -> tuple[list[Piece] | None, Tree, RoadmapStats]:
     """Grow the tree from ``start`` until a node is at ``X_goal`` (4, 4, grasp frame): the
     transfers and regrasps from the start to it, or None within ``o.nodes`` expansions.
@@ -366,7 +366,7 @@ def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Gener
     for it in range(o.nodes):
         stats.iterations = it + 1
         to_goal = rng.random() < o.goal_bias
-        target = X_goal if to_goal else _random_pose(start.X_GO, o.box_m, rng)
+        target = X_goal if to_goal else random_pose(start.X_GO, o.box_m, rng)
         j = _extend(s, tree, target, to_goal, goal_fails, rng, o, g)
         if progress is not None:
             progress()
@@ -379,7 +379,7 @@ def grow(s: GsScratch, start: GsConfig, X_goal: np.ndarray, rng: np.random.Gener
     return None, tree, stats
 
 
-def connect(s: GsScratch, a: GsConfig, b: GsConfig, rng: np.random.Generator, o: RoadmapOptions,
+def connect(s: GsScratch, a: GsConfig, b: GsConfig, rng: np.random.Generator, o: GaitTreeOptions,
             g: GaitOptions) -> list[Piece] | None:
     """Transfers and regrasps from ``a`` to ``b`` (seed 003 §V's transfer-regrasp and
     regrasp-transfer sequences that link two GS_n configurations): the object carried to
@@ -400,7 +400,7 @@ def connect(s: GsScratch, a: GsConfig, b: GsConfig, rng: np.random.Generator, o:
 
 
 def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.Generator,
-                 o: RoadmapOptions = RoadmapOptions(), g: GaitOptions = GaitOptions(),
+                 o: GaitTreeOptions = GaitTreeOptions(), g: GaitOptions = GaitOptions(),
                  progress: Callable[[], None] | None = None
                  ) -> tuple[list[Piece] | None, tuple[Tree, Tree], RoadmapStats]:
     """Two trees, from ``start`` and from ``goal`` (a grasp at the goal pose), grown by
@@ -422,7 +422,7 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
     return trees[0].path(a) + link + reversed_path(trees[1].path(b)), trees, stats
 
 
-def join_trees(s: GsScratch, trees: tuple[Tree, Tree], rng: np.random.Generator, o: RoadmapOptions,
+def join_trees(s: GsScratch, trees: tuple[Tree, Tree], rng: np.random.Generator, o: GaitTreeOptions,
                g: GaitOptions, stats: RoadmapStats, at_goal: bool = False,
                progress: Callable[[], None] | None = None) -> tuple[int, int, list[Piece]] | None:
     """Grow the two trees in turn as :func:`grow` grows one, each towards the other's
@@ -441,7 +441,7 @@ def join_trees(s: GsScratch, trees: tuple[Tree, Tree], rng: np.random.Generator,
         tree, other = trees[k], trees[1 - k]
         to_goal = rng.random() < o.goal_bias
         aim = other.nodes[-1].X_GO if o.aim_newest else aims[k]
-        target = aim if to_goal else _random_pose(tree.nodes[0].X_GO, o.box_m, rng)
+        target = aim if to_goal else random_pose(tree.nodes[0].X_GO, o.box_m, rng)
         j = _extend(s, tree, target, to_goal, goal_fails[k], rng, o, g)
         if progress is not None:
             progress()
@@ -450,7 +450,7 @@ def join_trees(s: GsScratch, trees: tuple[Tree, Tree], rng: np.random.Generator,
         new = tree.nodes[j]
         if at_goal and k == 0 and _distance(new.X_GO, aims[0], s.rho) < 1e-9:
             return j, 0, []
-        d = _distances(np.array([c.X_GO for c in other.nodes]), new.X_GO, s.rho)
+        d = pose_distances(np.array([c.X_GO for c in other.nodes]), new.X_GO, s.rho)
         for m in np.argsort(d)[:2]:
             if d[m] > o.connect_rad:
                 break

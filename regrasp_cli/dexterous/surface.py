@@ -25,7 +25,7 @@ _INSIDE = 1e-6  # barycentric margin: a point on an edge or a vertex is moved th
 
 
 @dataclass(frozen=True)
-class Surface:
+class MeshSurface:
     """A triangulated surface, vertices merged (geodesics need shared edges)."""
 
     V: np.ndarray  # (m, 3) vertices, m
@@ -34,7 +34,7 @@ class Surface:
     cumulative: np.ndarray  # (k,) cumulative area fractions, for sampling by area
 
     @classmethod
-    def of(cls, mesh: trimesh.Trimesh) -> "Surface":
+    def of(cls, mesh: trimesh.Trimesh) -> "MeshSurface":
         m = mesh.copy()
         m.merge_vertices()
         m.update_faces(m.nondegenerate_faces())
@@ -101,7 +101,7 @@ class Surface:
         return tri, bary[:, 1:]
 
 
-def geodesic(s: Surface, tri: tuple[int, int], uv: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
+def geodesic(s: MeshSurface, tri: tuple[int, int], uv: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
     """The surface path from contact ``(tri[0], uv[0])`` to ``(tri[1], uv[1])``: (k, 3)
     points, the first and last the contacts, each segment inside one triangle; None where
     the mesh is not manifold (the solver's requirement)."""

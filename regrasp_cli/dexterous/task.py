@@ -30,9 +30,9 @@ from regrasp_cli.dexterous.gsn import GsConfig, GsOptions, GsScratch
 from regrasp_cli.dexterous.multiquery import GsRoadmap, LearnOptions, LearnStats, from_arrays, learn, query, \
     to_arrays
 from regrasp_cli.dexterous.hand import reach, tip_targets
-from regrasp_cli.dexterous.roadmap import RoadmapOptions, grow, grow_connect, start_config, tree_budgets
+from regrasp_cli.dexterous.roadmap import GaitTreeOptions, grow, grow_connect, start_config, tree_budgets
 from regrasp_cli.dexterous.smooth import smooth
-from regrasp_cli.dexterous.surface import Surface
+from regrasp_cli.dexterous.surface import MeshSurface
 from regrasp_cli.errors import InputError, StaleArtefactError
 from regrasp_cli.grasp.single import HandModel
 from regrasp_cli.grasp.surface import build_surface
@@ -118,7 +118,7 @@ def scratch(problem: InhandProblem, cache_dir: Path | None, rng: np.random.Gener
         world = collision_world(robot, problem.obstacles, problem.disabled.links(),
                                 ObjectPlacement(mesh, hm.X_WG, None, (hand,)),
                                 CollisionOptions(CONTACT_TOLERANCE, CONTACT_TOLERANCE))
-    return GsScratch(hm, ws, sampled, Surface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction),
+    return GsScratch(hm, ws, sampled, MeshSurface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction),
                      world=world)
 
 
@@ -190,7 +190,7 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int,
     s = scratch(problem, cache_dir, rng)
     _check_size(problem, s)
     _check_reach(problem, s)
-    options = RoadmapOptions(step_rad=o.step_rad, nodes=o.nodes)
+    options = GaitTreeOptions(step_rad=o.step_rad, nodes=o.nodes)
     out = InhandOutcome(X_WG=s.X_WG)
     stages = {"setup": perf_counter() - t0}
     t = perf_counter()
@@ -255,7 +255,7 @@ def _smoothed(problem: InhandProblem, s: GsScratch, pieces: list[Piece], rng: np
 
 
 def _plan_multi_query(problem: InhandProblem, s: GsScratch, cache_dir: Path | None, start: GsConfig,
-                      goal: GsConfig, rng: np.random.Generator, options: RoadmapOptions, out: InhandOutcome,
+                      goal: GsConfig, rng: np.random.Generator, options: GaitTreeOptions, out: InhandOutcome,
                       stages: dict, t0: float, builder: Builder | None) -> InhandOutcome:
     """§V's multi-query version: the learned roadmap (built first when missing), the start
     and goal grasps joined to it, the path over it."""
@@ -275,7 +275,7 @@ def _plan_multi_query(problem: InhandProblem, s: GsScratch, cache_dir: Path | No
     return _smoothed(problem, s, pieces, rng, out, stages, t0)
 
 
-def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: RoadmapOptions, g: GaitOptions) -> Provenance:
+def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: GaitTreeOptions, g: GaitOptions) -> Provenance:
     """What a learned roadmap depends on: the robot, the object's geometry, the hand's
     posture, the friction, where the object is held, the obstacles and the options the
     learning reads (not a query's own: ``QUERY_ONLY``)."""
@@ -308,7 +308,7 @@ def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptio
     artefacts (:mod:`regrasp_cli.artefacts`).  A roadmap of a single node is an error: no
     grasp at a random orientation joined it."""
     spec = problem.spec
-    r = replace(RoadmapOptions(), step_rad=spec.planning.step_rad)
+    r = replace(GaitTreeOptions(), step_rad=spec.planning.step_rad)
     g = GaitOptions(gait_m=spec.planning.gait_m)
     prov = roadmap_provenance(problem, o, r, g)
     path = None if cache_dir is None else roadmap_path(cache_dir, problem, prov)
@@ -326,7 +326,7 @@ def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptio
     return rm, st, True
 
 
-def _learn(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions, r: RoadmapOptions, g: GaitOptions,
+def _learn(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions, r: GaitTreeOptions, g: GaitOptions,
            progress) -> tuple[GsRoadmap, LearnStats]:
     rng = np.random.default_rng(o.seed)
     s = scratch(problem, cache_dir, rng)
@@ -337,7 +337,7 @@ def _learn(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions, r: R
     return rm, st
 
 
-def goal_config(problem: InhandProblem, s: GsScratch, rng: np.random.Generator, o: RoadmapOptions) -> GsConfig:
+def goal_config(problem: InhandProblem, s: GsScratch, rng: np.random.Generator, o: GaitTreeOptions) -> GsConfig:
     """The goal tree's root: the best of ``GOAL_PROBES`` RLG samples at the goal pose
     (:func:`roadmap.start_config`); InputError when none holds the object there."""
     spec = problem.spec

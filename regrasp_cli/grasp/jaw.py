@@ -64,7 +64,7 @@ class Jaw:
     revolute: bool = False  # a driver turns: pads move on arcs (:func:`close_revolute`)
 
 
-def _finger_pairs(hm: HandModel, f: int) -> list[int]:
+def finger_pairs(hm: HandModel, f: int) -> list[int]:
     """Collision pairs (finger f's geometries, object) of a :class:`HandModel`."""
     return [k for k, (fa, fb) in enumerate(hm.pair_fingers) if fa == f and fb is None]
 
@@ -445,7 +445,7 @@ def jaw_grasp(hm: HandModel, jaw: Jaw, surface: Surface, X_OG: np.ndarray, frame
     points, normals, axes = np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3))
     for f in (0, 1):
         # the witness of the geometry truly nearest (an eroded pad touching reads +erosion)
-        found = [(pin.computeDistance(hm.gm, hm.gd, k), k) for k in _finger_pairs(hm, f)]
+        found = [(pin.computeDistance(hm.gm, hm.gd, k), k) for k in finger_pairs(hm, f)]
         best = min(found, key=lambda rk: rk[0].min_distance - hm.erosion[hm.gm.collisionPairs[rk[1]].first])[0]
         axes[f] = X_OG[:3, :3] @ jaw.closing_G[f]
         points[f], normals[f] = contact_patch(surface, X_OW[:3, :3] @ best.getNearestPoint2() + X_OW[:3, 3], axes[f],

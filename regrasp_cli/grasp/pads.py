@@ -35,7 +35,7 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
-from regrasp_cli.grasp.jaw import ADVANCE_ITERATIONS, CONTACT_GAP, _finger_pairs, contact_patch, outside_distance
+from regrasp_cli.grasp.jaw import ADVANCE_ITERATIONS, CONTACT_GAP, finger_pairs, contact_patch, outside_distance
 from regrasp_cli.grasp.single import Grasp, GraspOptions, HandModel, scored_grasp
 from regrasp_cli.grasp.surface import Surface
 from regrasp_cli.model.robot import Kinematics, carries
@@ -198,7 +198,7 @@ def _finger_gap(hm: HandModel, f: int) -> tuple[float, int]:
     """Distance (m) from finger f's true surface to the object at the current placements,
     and the collision pair that gives it."""
     best, k_best = np.inf, -1
-    for k in _finger_pairs(hm, f):
+    for k in finger_pairs(hm, f):
         d = pin.computeDistance(hm.gm, hm.gd, k).min_distance - hm.erosion[hm.gm.collisionPairs[k].first]
         if d < best:
             best, k_best = d, k

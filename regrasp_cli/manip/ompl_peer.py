@@ -33,7 +33,7 @@ import numpy as np
 
 from regrasp_cli.errors import InputError
 from regrasp_cli.manip.context import Scratch
-from regrasp_cli.manip.queries import PhaseWorlds, QueryFailed, QueryStats, _with_fingers, smooth
+from regrasp_cli.manip.queries import PhaseWorlds, QueryFailed, QueryStats, set_fingers, smooth
 
 MOVING_GROUPS = ("torso", "right_arm", "left_arm")
 MISSING = "ompl-rrtconnect needs the optional extra: pip install 'regrasp[ompl]'"
@@ -104,7 +104,7 @@ def ompl_query(scratch: Scratch, rng: np.random.Generator, a: np.ndarray, b: np.
     moving = np.concatenate([robot.groups[g] for g in MOVING_GROUPS])
     n = len(moving)
     scale = np.sqrt(np.asarray(weights, float)[moving])  # state = sqrt(w) * q: Euclidean = weighted
-    base = _with_fingers(scratch, np.asarray(a, float), worlds.fingers)
+    base = set_fingers(scratch, np.asarray(a, float), worlds.fingers)
 
     def to_q(state) -> np.ndarray:
         q = base.copy()

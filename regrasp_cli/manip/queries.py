@@ -93,7 +93,7 @@ class PhaseWorlds:
     fingers: dict  # hand -> finger values during the phase
 
 
-def _with_fingers(scratch: Scratch, q: np.ndarray, fingers: dict) -> np.ndarray:
+def set_fingers(scratch: Scratch, q: np.ndarray, fingers: dict) -> np.ndarray:
     q = q.copy()
     for hand, values in fingers.items():
         q[scratch.problem.robot.hands[hand].idx] = values
@@ -106,7 +106,7 @@ def _rrt(scratch: Scratch, rng: np.random.Generator, a: np.ndarray, b: np.ndarra
     moving = np.concatenate([robot.groups["torso"], robot.groups["right_arm"], robot.groups["left_arm"]])
 
     def sample():
-        return _with_fingers(scratch, robot.sample(rng, moving, base=a), fingers)
+        return set_fingers(scratch, robot.sample(rng, moving, base=a), fingers)
 
     res = rrt_connect(a, b, sample, lambda x, y: scratch.segment_free(world, x, y),
                       lambda x, ys: distance(x, ys, weights), rng, scratch.options.rrt)
@@ -138,7 +138,7 @@ def _escape(scratch: Scratch, rng: np.random.Generator, rm: Roadmap, q: np.ndarr
         if rng.random() < 0.3:  # towards a random roadmap node
             target = q_of(int(rm.giant[rng.integers(len(rm.giant))]))
         else:
-            target = _with_fingers(scratch, robot.sample(rng, moving, base=q), fingers)
+            target = set_fingers(scratch, robot.sample(rng, moving, base=q), fingers)
         d = distance(target, np.asarray(nodes), rm.weights)
         i = int(np.argmin(d))
         step = o.rrt.step / max(float(d[i]), 1e-12)
@@ -217,7 +217,7 @@ class _LazyView:
 
     def q_of(self, i: int) -> np.ndarray:
         if i not in self.node:
-            self.node[i] = _with_fingers(self.scratch, self.rm.nodes[i], self.worlds.fingers)
+            self.node[i] = set_fingers(self.scratch, self.rm.nodes[i], self.worlds.fingers)
         return self.node[i]
 
     def node_free(self, i: int) -> bool:

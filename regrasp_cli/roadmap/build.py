@@ -40,7 +40,7 @@ from regrasp_cli.roadmap.compose import (LEFT, RIGHT, SuperGraph, UnionFind, can
                                          subsystem)
 from regrasp_cli.motion.local import LocalPlanner, distance, joint_reach, joint_weights
 from regrasp_cli.roadmap.rejections import FEW, Rejections, pairs_text, tallied
-from regrasp_cli.roadmap.visprm import Roadmap, VisPRMOptions, visibility_prm
+from regrasp_cli.roadmap.visprm import ElementaryRoadmap, VisPRMOptions, visibility_prm
 from regrasp_cli.scene import Problem, load_problem, obstacles_sha256
 from regrasp_cli.store import Provenance, canonical_json, read_artefact, read_provenance, robot_identity, \
     sha256_params, write_artefact
@@ -68,8 +68,8 @@ class RoadmapArtefact:
     """What is stored: the elementary roadmaps (nodes over torso + arm joints, in group
     order) and the Super Graph (full configurations)."""
 
-    right: Roadmap
-    left: Roadmap
+    right: ElementaryRoadmap
+    left: ElementaryRoadmap
     graph: SuperGraph
     joint_names: tuple[str, ...]
     weights: np.ndarray  # (nq,) of the distance metric
@@ -222,7 +222,7 @@ def edge_chains(robot) -> tuple[tuple[np.ndarray, ...] | None, ...]:
     return ((np.r_[t, l], np.r_[l, r]), (np.r_[t, r], np.r_[l, r]), None)
 
 
-def _elementary(b: _Build, side: str) -> tuple[Roadmap, int, Rejections]:
+def _elementary(b: _Build, side: str) -> tuple[ElementaryRoadmap, int, Rejections]:
     """The elementary roadmap of torso + ``side`` arm, its collision checks, and what its
     collision checks rejected."""
     problem, options, planner = b.problem, b.options, b.planner
@@ -408,7 +408,7 @@ def _rest_note(rest: list[tuple[str, str]]) -> str:
             f"collision: {pairs_text(rest)}") if rest else ""
 
 
-def _check_elementary(options: RoadmapOptions, roadmaps: dict[str, tuple[Roadmap, Rejections]],
+def _check_elementary(options: RoadmapOptions, roadmaps: dict[str, tuple[ElementaryRoadmap, Rejections]],
                          rest: list[tuple[str, str]]) -> list[str]:
     """Raises EmptyRoadmap when an elementary roadmap has no node, naming the pairs that
     rejected most samples (and ``rest``, the colliding pairs of the rest configuration);
@@ -426,7 +426,7 @@ def _check_elementary(options: RoadmapOptions, roadmaps: dict[str, tuple[Roadmap
     return few
 
 
-def _super_graph_nodes(b: _Build, right: Roadmap, left: Roadmap, rest: list[tuple[str, str]]):
+def _super_graph_nodes(b: _Build, right: ElementaryRoadmap, left: ElementaryRoadmap, rest: list[tuple[str, str]]):
     """Super Graph nodes (m, nq), their sources (m, 3), the candidates tested, the
     collision checks made, and a warning when fewer than :data:`FEW` of the candidates
     are free; raises EmptyRoadmap when none is."""
@@ -443,7 +443,7 @@ def _super_graph_nodes(b: _Build, right: Roadmap, left: Roadmap, rest: list[tupl
 
 
 def summary(art: RoadmapArtefact) -> dict[str, str]:
-    def comps(rm: Roadmap) -> int:
+    def comps(rm: ElementaryRoadmap) -> int:
         g = nx.Graph()
         g.add_nodes_from(range(len(rm.nodes)))
         g.add_edges_from(map(tuple, rm.edges))
@@ -479,7 +479,7 @@ def write_roadmap(path: Path, prov: Provenance, art: RoadmapArtefact, options: R
 def read_roadmap(path: Path, expected: Provenance | None = None) -> RoadmapArtefact:
     """Load a roadmap; with ``expected``, refuse it when the robot, obstacles or options changed."""
     a = read_artefact(path, expected or read_provenance(path), rebuild="regrasp roadmap build")
-    rms = {side: Roadmap(a[f"{side}/nodes"], a[f"{side}/edges"], a[f"{side}/lengths"], a[f"{side}/guard"].astype(bool),
+    rms = {side: ElementaryRoadmap(a[f"{side}/nodes"], a[f"{side}/edges"], a[f"{side}/lengths"], a[f"{side}/guard"].astype(bool),
                          int(a.attrs[f"samples_{side}"])) for side in ("right", "left")}
     sg = SuperGraph(a["super_graph/nodes"], a["super_graph/source"], a["super_graph/edges"], a["super_graph/lengths"],
                     int(a.attrs["candidate_nodes"]), int(a.attrs["candidate_edges"]))

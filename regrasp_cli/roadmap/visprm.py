@@ -33,7 +33,7 @@ class VisPRMOptions:
 
 
 @dataclass(frozen=True)
-class Roadmap:
+class ElementaryRoadmap:
     """Nodes (n, d) in the order they were added, edges (e, 2) with i < j, their lengths
     (e,), whether each node is a guard (n,), and the number of samples drawn."""
 
@@ -55,7 +55,7 @@ def visibility_prm(sample: Callable[[], np.ndarray], is_free: Callable[[np.ndarr
                    segment_free: Callable[[np.ndarray, np.ndarray], bool],
                    distance: Callable[[np.ndarray, np.ndarray], np.ndarray],
                    options: VisPRMOptions = VisPRMOptions(), progress: Callable[[int], None] | None = None,
-                   maybe_free: Callable[[np.ndarray, np.ndarray], bool] | None = None) -> Roadmap:
+                   maybe_free: Callable[[np.ndarray, np.ndarray], bool] | None = None) -> ElementaryRoadmap:
     """``maybe_free(q0, q1)``: a cheap test that may only answer False for a segment that
     really collides (e.g. a few samples of it); defaults to ``segment_free``."""
     maybe_free = maybe_free or segment_free
@@ -121,4 +121,5 @@ def visibility_prm(sample: Callable[[], np.ndarray], is_free: Callable[[np.ndarr
             progress(len(nodes))
     e = np.array([(a, b) for a, b, _ in edges], dtype=np.int64).reshape(-1, 2)
     lengths = np.array([l for _, _, l in edges], dtype=float)
-    return Roadmap(np.array(nodes, dtype=float).reshape(len(nodes), dim), e, lengths, np.array(guard, dtype=bool), samples)
+    return ElementaryRoadmap(np.array(nodes, dtype=float).reshape(len(nodes), dim), e, lengths,
+                             np.array(guard, dtype=bool), samples)

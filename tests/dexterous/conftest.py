@@ -10,7 +10,7 @@ import trimesh
 from conftest import ROOT
 
 from regrasp_cli.dexterous.gsn import GsScratch
-from regrasp_cli.dexterous.surface import Surface
+from regrasp_cli.dexterous.surface import MeshSurface
 from regrasp_cli.grasp.single import HandModel
 from regrasp_cli.grasp.surface import build_surface, sampling_step
 from regrasp_cli.grasp.workspace import hand_workspace
@@ -27,4 +27,4 @@ def hand4_ball(cache_dir) -> GsScratch:
     hm = HandModel(robot, "right", mesh, disabled_pairs(robot, cache_dir).links(), 0.002)
     ws = hand_workspace(robot, "right", cache_dir=cache_dir)
     sampled = build_surface(mesh, sampling_step(0.004), np.random.default_rng(0))
-    return GsScratch(hm, ws, sampled, Surface.of(mesh), R)
+    return GsScratch(hm, ws, sampled, MeshSurface.of(mesh), R)

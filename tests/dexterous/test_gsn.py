@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from regrasp_cli.dexterous.gsn import GsScratch, gs_path, sample_config
 from regrasp_cli.dexterous.hand import tip_targets
-from regrasp_cli.dexterous.surface import Surface
+from regrasp_cli.dexterous.surface import MeshSurface
 from regrasp_cli.grasp.frames import grasp_frames
 from regrasp_cli.grasp.single import HandModel
 from regrasp_cli.grasp.surface import build_surface, sampling_step
@@ -35,7 +35,7 @@ def gs(robot, cache_dir):
     ws = hand_workspace(robot, "right", cache_dir=cache_dir)
     hm.voxels(ws)
     sampled = build_surface(mesh, sampling_step(0.01), np.random.default_rng(0))
-    s = GsScratch(hm, ws, sampled, Surface.of(mesh), R)
+    s = GsScratch(hm, ws, sampled, MeshSurface.of(mesh), R)
     configs = [c for X_OG in grasp_frames(mesh.bounds, 4, 256)[::4]
                if (c := sample_config(s, inverse(X_OG))) is not None]
     return s, mesh, configs
@@ -117,7 +117,7 @@ def test_with_fingers_round_the_sphere_every_finger_may_let_go(cache_dir):
     hm = HandModel(robot, "right", mesh, disabled_pairs(robot, cache_dir).links(), 0.002)
     ws = hand_workspace(robot, "right", cache_dir=cache_dir)
     hm.voxels(ws)
-    s = GsScratch(hm, ws, build_surface(mesh, sampling_step(0.008), np.random.default_rng(0)), Surface.of(mesh), R)
+    s = GsScratch(hm, ws, build_surface(mesh, sampling_step(0.008), np.random.default_rng(0)), MeshSurface.of(mesh), R)
     configs = [c for X_OG in grasp_frames(mesh.bounds, 4, 64) if (c := sample_config(s, inverse(X_OG))) is not None]
     all_four = [c for c in configs if len(s.liftable(c)) == 4]
     assert len(configs) >= 50 and len(all_four) >= 0.1 * len(configs)

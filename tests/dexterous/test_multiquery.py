@@ -21,7 +21,7 @@ from tests.dexterous.test_roadmap import _assert_feasible, _goal, gs  # noqa: F4
 from regrasp_cli.config import load_inhand_spec
 from regrasp_cli.dexterous.gait import GaitOptions
 from regrasp_cli.dexterous.multiquery import LearnOptions, from_arrays, learn, query, to_arrays
-from regrasp_cli.dexterous.roadmap import RoadmapOptions, start_config
+from regrasp_cli.dexterous.roadmap import GaitTreeOptions, start_config
 from regrasp_cli.dexterous.task import inhand_roadmap, load_inhand_problem, roadmap_path, roadmap_provenance
 from regrasp_cli.errors import InputError
 
@@ -59,8 +59,8 @@ def test_the_roadmap_survives_its_storage_as_arrays(learned):
 def test_a_query_runs_from_the_start_grasp_to_the_goal_pose(gs, learned):  # noqa: F811
     rm, _ = learned
     rng = np.random.default_rng(5)
-    start = start_config(gs, np.eye(4), rng, RoadmapOptions(start_samples=20))
-    goal = start_config(gs, _goal(2.0, [1, 1, 0]), rng, RoadmapOptions(start_samples=20))
+    start = start_config(gs, np.eye(4), rng, GaitTreeOptions(start_samples=20))
+    goal = start_config(gs, _goal(2.0, [1, 1, 0]), rng, GaitTreeOptions(start_samples=20))
     pieces, st, why = query(gs, rm, start, goal, rng, SMALL)
     assert pieces is not None, why
     X = _assert_feasible(gs, pieces, start)
@@ -85,7 +85,7 @@ def test_the_cached_roadmap_is_reused_and_rebuilt_when_its_bytes_change(tmp_path
     assert built
     again, _, built = inhand_roadmap(problem, cache, opts)
     assert not built and len(again.nodes) == len(rm.nodes)
-    r = replace(RoadmapOptions(), step_rad=problem.spec.planning.step_rad)
+    r = replace(GaitTreeOptions(), step_rad=problem.spec.planning.step_rad)
     g = GaitOptions(gait_m=problem.spec.planning.gait_m)
     path = roadmap_path(cache, problem, roadmap_provenance(problem, opts, r, g))
     with h5py.File(path, "r+") as f:
@@ -100,7 +100,7 @@ def test_two_objects_get_two_roadmap_files(tmp_path, cache_dir):
     d["object"]["mesh"] = "builtin:cube"
     (tmp_path / "cube.yaml").write_text(yaml.safe_dump(d))
     cube = load_inhand_problem(tmp_path / "cube.yaml", cache_dir)
-    o, r, g = LearnOptions(), RoadmapOptions(), GaitOptions()
+    o, r, g = LearnOptions(), GaitTreeOptions(), GaitOptions()
     paths = {roadmap_path(tmp_path, p, roadmap_provenance(p, o, r, g)) for p in (ball, cube)}
     assert len(paths) == 2  # else each would find the other's file stale and learn over it
 
@@ -113,7 +113,7 @@ def test_a_bad_mode_is_refused_with_its_field(tmp_path):
 
 def test_a_query_option_keeps_the_learned_roadmap_and_a_learning_option_does_not(tmp_path, cache_dir):
     problem = load_inhand_problem(_scene(tmp_path), cache_dir)
-    o, r, g = LearnOptions(), RoadmapOptions(), GaitOptions()
+    o, r, g = LearnOptions(), GaitTreeOptions(), GaitOptions()
     key = lambda o, r: roadmap_provenance(problem, o, r, g).inputs["params"]  # noqa: E731
     base = key(o, r)
     # the query's budget and aim, and how many detours it cuts: the same roadmap

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from regrasp_cli.dexterous.gait import GaitOptions, Regrasp, Transfer, carry, finger_step, reduce_path, reversed_path
 from regrasp_cli.dexterous.gsn import GsScratch, gs_path
 from regrasp_cli.dexterous.hand import tip_targets
-from regrasp_cli.dexterous.roadmap import (RoadmapOptions, _reach_ahead, _turns, aimed_regrasp, connect, grow,
+from regrasp_cli.dexterous.roadmap import (GaitTreeOptions, _reach_ahead, _turns, aimed_regrasp, connect, grow,
                                            grow_connect, start_config, step_towards, tree_budgets)
 from regrasp_cli.dexterous.smooth import smooth
 from regrasp_cli.spatial import inverse
@@ -65,7 +65,7 @@ def _assert_feasible(s: GsScratch, pieces, start):
 def test_the_tree_turns_a_sphere_by_finger_gaiting(gs):
     s = gs
     rng = np.random.default_rng(0)
-    o = RoadmapOptions(nodes=150)
+    o = GaitTreeOptions(nodes=150)
     start = start_config(s, np.eye(4), rng, o)
     assert start is not None and len(s.liftable(start)) == 4
     goal = _goal(1.3, [1.0, 0.5, 0.2])
@@ -82,7 +82,7 @@ def test_two_trees_turn_a_sphere_from_the_start_grasp_to_a_grasp_at_the_goal(gs)
     feasible piece by piece, and ends exactly on the goal tree's root grasp."""
     s = gs
     rng = np.random.default_rng(6)
-    o = RoadmapOptions(nodes=300)
+    o = GaitTreeOptions(nodes=300)
     start = start_config(s, np.eye(4), rng, o)
     goal = start_config(s, _goal(2.5, [0.3, 1.0, -0.4]), rng, o)
     pieces, trees, stats = grow_connect(s, start, goal, rng, o)
@@ -94,7 +94,7 @@ def test_two_trees_turn_a_sphere_from_the_start_grasp_to_a_grasp_at_the_goal(gs)
 def test_a_path_run_backwards_is_feasible_from_its_end(gs):
     s = gs
     rng = np.random.default_rng(7)
-    o = RoadmapOptions(nodes=60)
+    o = GaitTreeOptions(nodes=60)
     start = start_config(s, np.eye(4), rng, o)
     pieces, _, _ = grow(s, start, _goal(0.8, [0, 1, 0]), rng, o)
     assert pieces is not None and {type(p) for p in pieces} == {Transfer, Regrasp}
@@ -108,11 +108,11 @@ def test_two_grasps_at_nearby_poses_are_joined_by_a_transfer_and_regrasps(gs):
     the second one (pose, contacts and joints)."""
     s = gs
     rng = np.random.default_rng(8)
-    o = RoadmapOptions()
+    o = GaitTreeOptions()
     a = start_config(s, np.eye(4), rng, o)
     joined = 0
     for k in range(6):
-        b = start_config(s, _goal(0.2, [1.0, k, 0.5]), rng, RoadmapOptions(start_samples=10))
+        b = start_config(s, _goal(0.2, [1.0, k, 0.5]), rng, GaitTreeOptions(start_samples=10))
         link = None if b is None else connect(s, a, b, rng, o, GaitOptions())
         if link is None:
             continue
@@ -130,7 +130,7 @@ def test_a_gs_n_path_reduces_to_transfers_and_regrasps_near_it(gs):
     reduced = 0
     for seed in range(8):
         rng = np.random.default_rng(seed)
-        start = start_config(s, np.eye(4), rng, RoadmapOptions())
+        start = start_config(s, np.eye(4), rng, GaitTreeOptions())
         X = step_towards(start.X_GO, _goal(1.0, [0, 1, 0]), 0.3, 0.01)
         # the contacts slide to where the fingertips are once the sphere has turned
         c_G = (inverse(s.X_WG) @ np.c_[s.hand.tips(s.kin, start.q), np.ones(4)].T)
@@ -148,7 +148,7 @@ def test_a_gs_n_path_reduces_to_transfers_and_regrasps_near_it(gs):
 def test_a_finger_that_the_others_cannot_spare_does_not_step(gs):
     s = gs
     rng = np.random.default_rng(2)
-    start = start_config(s, np.eye(4), rng, RoadmapOptions())
+    start = start_config(s, np.eye(4), rng, GaitTreeOptions())
     # three contacts on one side of the sphere cannot hold it: drop all but two fingers'
     # support by moving them to the first finger's side, then no finger may step
     p, n = start.p.copy(), start.n.copy()
@@ -168,7 +168,7 @@ def test_an_aimed_regrasp_lets_the_object_turn_further_towards_the_goal(gs):
     workspace), the aimed regrasp moves one finger so that they can follow more of them,
     then carries the object one edge towards the goal when it can, all physically
     feasible."""
-    s, o = gs, RoadmapOptions(regrasp_carry=True)
+    s, o = gs, GaitTreeOptions(regrasp_carry=True)
     rng = np.random.default_rng(3)
     start = start_config(s, np.eye(4), rng, o)
     tried = improved = carried = 0
@@ -196,7 +196,7 @@ def test_smoothing_steps_a_finger_once_where_it_stepped_twice(gs):
     ended, and the path still starts and ends at the same configurations."""
     s = gs
     rng = np.random.default_rng(5)
-    start = start_config(s, np.eye(4), rng, RoadmapOptions())
+    start = start_config(s, np.eye(4), rng, GaitTreeOptions())
     f = next(iter(s.liftable(start)))
     first = None
     for k in rng.permutation(len(s.sampled.points)):  # two steps of finger f, the second onwards
@@ -237,7 +237,7 @@ def test_a_step_whose_other_fingers_hold_only_at_the_boundary_is_refused(gs, mon
     validator's margin, says they do not: the step is not kept."""
     s = gs
     rng = np.random.default_rng(9)
-    start = start_config(s, np.eye(4), rng, RoadmapOptions())
+    start = start_config(s, np.eye(4), rng, GaitTreeOptions())
     f = next(iter(s.liftable(start)))
     target = next(k for k in rng.permutation(len(s.sampled.points))
                   if 0.004 < np.linalg.norm(s.sampled.points[k] - start.p[f]) < 0.012
@@ -246,3 +246,29 @@ def test_a_step_whose_other_fingers_hold_only_at_the_boundary_is_refused(gs, mon
     monkeypatch.setattr(s, "closed", lambda p, n, without=None: False)
     assert finger_step(s, start, f, s.sampled.points[target], s.sampled.normals[target],
                        np.random.default_rng(1)) is None
+
+
+def test_a_lifted_fingertip_gets_no_contact_tolerance(gs):
+    """Issue 42: a finger that lets go must stay off the object until its new contact.
+    Lifting straight off along the normal and coming back is clear; the same with a
+    waypoint that puts the fingertip back 1 mm into the ball (within the 2 mm that
+    touching fingertips get) is not."""
+    from regrasp_cli.dexterous.gait import lifts_clear
+    from regrasp_cli.model.ik import finger_ik
+
+    s = gs
+    rng = np.random.default_rng(3)
+    start = start_config(s, np.eye(4), rng, GaitTreeOptions())
+    f = next(iter(s.liftable(start)))
+    X_WO = s.X_WG @ start.X_GO
+    r = s.hand.radii[f]
+
+    def at(depth):  # finger f with its fingertip sphere ``depth`` off its contact (m)
+        c_O = start.p[f] + (r + depth) * start.n[f]
+        ik = finger_ik(s.hm.robot, s.hm.hand.side, f, X_WO[:3, :3] @ c_O + X_WO[:3, 3], start.q, rng)
+        assert ik.success
+        return ik.q
+
+    up, inside = at(0.01), at(-0.001)
+    assert lifts_clear(s, [start.q, up, start.q], f, X_WO, 0.01)
+    assert not lifts_clear(s, [start.q, inside, up, start.q], f, X_WO, 0.01)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from regrasp_cli.dexterous.surface import Surface, along, geodesic, length
+from regrasp_cli.dexterous.surface import MeshSurface, along, geodesic, length
 
-CUBE = Surface.of(trimesh.creation.box(extents=[0.06, 0.06, 0.06]))
+CUBE = MeshSurface.of(trimesh.creation.box(extents=[0.06, 0.06, 0.06]))
 
 
 def _contact(p):
@@ -44,7 +44,7 @@ def test_the_geodesic_on_one_triangle_is_its_segment():
 
 def test_sampling_is_uniform_by_area_and_locate_inverts_points():
     mesh = trimesh.creation.box(extents=[0.02, 0.04, 0.08])
-    s = Surface.of(mesh)
+    s = MeshSurface.of(mesh)
     tri, uv = s.sample(np.random.default_rng(1), 4000)
     p = s.points(tri, uv)
     assert np.allclose(np.abs(mesh.nearest.signed_distance(p)), 0, atol=1e-9)
@@ -69,7 +69,7 @@ def test_locate_finds_the_nearest_triangle_as_trimesh_does_on_edges_and_vertices
     edge, over a vertex) it must give trimesh's answer, or plans would change in the last
     bits: points on the surface, off it, on edges, at vertices and over them, one by one
     and together."""
-    s = Surface.of(mesh)
+    s = MeshSurface.of(mesh)
     rng = np.random.default_rng(0)
     tri, uv = s.sample(rng, 200)
     on = s.points(tri, uv)

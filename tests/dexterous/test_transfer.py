@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from regrasp_cli.dexterous.gait import GaitOptions, carry
 from regrasp_cli.dexterous.hand import tip_targets
-from regrasp_cli.dexterous.roadmap import RoadmapOptions, start_config
+from regrasp_cli.dexterous.roadmap import GaitTreeOptions, start_config
 from regrasp_cli.dexterous.transfer import interpolate
 
 R = 0.035  # the sphere of tests/dexterous/conftest.py
@@ -22,7 +22,7 @@ R = 0.035  # the sphere of tests/dexterous/conftest.py
 @pytest.fixture(scope="module")
 def held(hand4_ball):
     s = hand4_ball
-    c = start_config(s, np.eye(4), np.random.default_rng(0), RoadmapOptions(start_samples=10))
+    c = start_config(s, np.eye(4), np.random.default_rng(0), GaitTreeOptions(start_samples=10))
     assert c is not None and s.closure(c.p, c.n) > 0  # a real grasp
     return s, c
 

@@ -13,7 +13,7 @@ import pytest
 from regrasp_cli.roadmap.compose import (COMMON, LEFT, OBSTACLE, RIGHT, UnionFind, candidate_edges, compose_nodes,
                                          edge_kind, hand_links, involving, link_parts, margin_rule, mixed,
                                          part_filter, subsystem)
-from regrasp_cli.roadmap.visprm import Roadmap
+from regrasp_cli.roadmap.visprm import ElementaryRoadmap
 
 SCENE_YAML = Path(__file__).resolve().parents[2] / "configs" / "scenes" / "desk_handover.yaml"
 
@@ -223,9 +223,9 @@ def test_composition_does_not_mutate_its_inputs(built, problem):
     from regrasp_cli.roadmap.build import _worlds, q_base
 
     art, options = built
-    right = Roadmap(*(_frozen(getattr(art.right, k)) for k in ("nodes", "edges", "lengths", "guard")),
+    right = ElementaryRoadmap(*(_frozen(getattr(art.right, k)) for k in ("nodes", "edges", "lengths", "guard")),
                             art.right.samples)
-    left = Roadmap(*(_frozen(getattr(art.left, k)) for k in ("nodes", "edges", "lengths", "guard")),
+    left = ElementaryRoadmap(*(_frozen(getattr(art.left, k)) for k in ("nodes", "edges", "lengths", "guard")),
                            art.left.samples)
     copies = {(side, k): np.array(getattr(rm, k), copy=True) for side, rm in (("right", right), ("left", left))
               for k in ("nodes", "edges", "lengths", "guard")}

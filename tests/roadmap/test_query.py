@@ -83,11 +83,12 @@ def test_shortest_path_on_a_built_super_graph_is_a_chain_of_edges():
     from regrasp_cli.manip.queries import Roadmap as QueryRoadmap
     from regrasp_cli.roadmap.build import RoadmapArtefact
     from regrasp_cli.roadmap.compose import SuperGraph
-    from regrasp_cli.roadmap.visprm import Roadmap
+    from regrasp_cli.roadmap.visprm import ElementaryRoadmap
 
     nodes = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [5.0, 5.0]])
     edges = np.array([[0, 1], [1, 2], [2, 3]])
-    empty = Roadmap(np.zeros((0, 2)), np.zeros((0, 2), dtype=np.int64), np.zeros(0), np.zeros(0, dtype=bool), 0)
+    empty = ElementaryRoadmap(np.zeros((0, 2)), np.zeros((0, 2), dtype=np.int64), np.zeros(0),
+                              np.zeros(0, dtype=bool), 0)
     art = RoadmapArtefact(empty, empty, SuperGraph(nodes, np.zeros((5, 3), dtype=np.int64), edges,
                                                    np.ones(3), 5, 3), ("a", "b"), np.ones(2))
     rm = QueryRoadmap.of(art)

@@ -9,7 +9,7 @@ import pytest
 from regrasp_cli.errors import EmptyRoadmap
 from regrasp_cli.roadmap.build import RoadmapOptions, _check_elementary
 from regrasp_cli.roadmap.rejections import DIAGNOSED, Rejections, pairs_text, tallied
-from regrasp_cli.roadmap.visprm import Roadmap
+from regrasp_cli.roadmap.visprm import ElementaryRoadmap
 
 
 def _world(free_below: float):
@@ -59,8 +59,8 @@ def test_describe_without_pairs_and_pairs_text():
     assert pairs_text([("a", str(i)) for i in range(5)], n=2) == "a–0, a–1 and 3 more"
 
 
-def _roadmap(n: int) -> Roadmap:
-    return Roadmap(np.zeros((n, 2)), np.zeros((0, 2), dtype=np.int64), np.zeros(0), np.ones(n, dtype=bool), 100)
+def _roadmap(n: int) -> ElementaryRoadmap:
+    return ElementaryRoadmap(np.zeros((n, 2)), np.zeros((0, 2), dtype=np.int64), np.zeros(0), np.ones(n, dtype=bool), 100)
 
 
 def _tally() -> Rejections:

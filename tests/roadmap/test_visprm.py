@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from regrasp_cli.roadmap.compose import UnionFind
-from regrasp_cli.roadmap.visprm import Roadmap, VisPRMOptions, visibility_prm
+from regrasp_cli.roadmap.visprm import ElementaryRoadmap, VisPRMOptions, visibility_prm
 
 CENTRE, RADIUS = np.array([0.5, 0.5]), 0.3
 
@@ -27,13 +27,13 @@ def euclid(q0: np.ndarray, qs: np.ndarray):
     return np.linalg.norm(np.asarray(qs) - q0, axis=-1)
 
 
-def planner(seed: int, options: VisPRMOptions, free=is_free, seg=segment_free, progress=None) -> Roadmap:
+def planner(seed: int, options: VisPRMOptions, free=is_free, seg=segment_free, progress=None) -> ElementaryRoadmap:
     rng = np.random.default_rng(seed)
     return visibility_prm(lambda: rng.uniform(0.0, 1.0, 2), free, seg, euclid, options, progress)
 
 
 @pytest.fixture(scope="module")
-def disc_roadmap() -> Roadmap:
+def disc_roadmap() -> ElementaryRoadmap:
     return planner(3, VisPRMOptions(max_nodes=40, max_failures=150))
 
 
