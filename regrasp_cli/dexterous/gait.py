@@ -108,13 +108,16 @@ def _segment_free(s: GsScratch, q_a: np.ndarray, q_b: np.ndarray, finger: int, c
 
 def tip_clearance(s: GsScratch, qs: np.ndarray, f: int, X_WO: np.ndarray) -> np.ndarray:
     """Distance (k,) from finger ``f``'s fingertip sphere to the object's surface at the
-    configurations ``qs`` (k, nq), the object at ``X_WO`` (4, 4): negative inside (m),
-    the mesh's signed distance as the validator measures it (an approximation, the
-    tangent plane of the nearest surface sample, let 0.1 mm through on a ball)."""
+    configurations ``qs`` (k, nq), the object at ``X_WO`` (4, 4): negative inside (m):
+    to the mesh's closest point, signed by the side of its face (the validator measures
+    the mesh's signed distance: the same near the surface; an approximation by the
+    tangent plane of the nearest surface sample let 0.1 mm through on a ball)."""
     tip = s.hm.hand.tip_frames[f]
     c_W = np.array([s.kin.fk(q, tip)[:3, 3] for q in qs])
     c_O = (c_W - X_WO[:3, 3]) @ X_WO[:3, :3]
-    return -trimesh.proximity.signed_distance(s.surface.mesh, c_O) - s.hand.radii[f]
+    mesh = s.surface.mesh
+    closest, d, tri = trimesh.proximity.closest_point(mesh, c_O)  # signed by the nearest face's side
+    return np.where(np.einsum("ij,ij->i", c_O - closest, mesh.face_normals[tri]) < 0, -d, d) - s.hand.radii[f]
 
 
 def lifts_clear(s: GsScratch, qs: list[np.ndarray], f: int, X_WO: np.ndarray, step_rad: float) -> bool:
@@ -123,15 +126,17 @@ def lifts_clear(s: GsScratch, qs: list[np.ndarray], f: int, X_WO: np.ndarray, st
     ``step_rad``?  The contact tolerance lets a touching fingertip into the object; a
     lifted one gets none: leaving, it goes no deeper than it was at its contact, between,
     not in at all, arriving, no deeper than it will be (:data:`LIFT_TOL` for rounding)."""
-    ends = tip_clearance(s, np.array([qs[0], qs[-1]]), f, X_WO)
     last = len(qs) - 2
+    samples, floors = [qs[0], qs[-1]], [np.inf, np.inf]  # the ends first: they set the floors
     for i, (a, b) in enumerate(zip(qs, qs[1:])):
         k = max(1, int(np.ceil(np.abs(b - a).max() / step_rad)))
         t = np.linspace(0.0, 1.0, k + 1)[1:-1] if i == last else np.linspace(0.0, 1.0, k + 1)[1:]
-        floor = min(0.0, ends[0] if i == 0 else 0.0, ends[1] if i == last else 0.0) - LIFT_TOL
-        if len(t) and tip_clearance(s, a + t[:, None] * (b - a), f, X_WO).min() < floor:
-            return False
-    return True
+        samples += list(a + t[:, None] * (b - a))
+        floors += [i] * len(t)  # the segment, for now
+    d = tip_clearance(s, np.array(samples), f, X_WO)  # one call: its cost is mostly per call
+    seg = np.array(floors[2:], dtype=int)
+    floor = np.minimum(0.0, np.minimum(np.where(seg == 0, d[0], 0.0), np.where(seg == last, d[1], 0.0))) - LIFT_TOL
+    return bool(np.all(d[2:] >= floor))
 
 
 def _off(s: GsScratch, q: np.ndarray, f: int, X_WO: np.ndarray, p_O: np.ndarray, n_O: np.ndarray,
@@ -202,6 +207,11 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
         return None
     if s.finger_collides(down, f):  # every lift's last segment ends there
         return None
+    # straight off each contact first: a joint-space line from a touching tip curves and
+    # can graze the surface; a millimetre-long one off along the normal does not
+    off_a = s.memoised(("off", c.q.tobytes(), c.X_GO.tobytes(), c.p[f].tobytes(), c.n[f].tobytes(), f),
+                       lambda: _off(s, c.q, f, X_WO, c.p[f], c.n[f], rng))
+    off_b = ...  # solved when first needed
     for h in o.lifts_m:
         for opened in (True, False):  # opening can drag the tip through the surface: then off along the normal
             # a node's finger is lifted at each step it tries
@@ -210,11 +220,8 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
             up_b = _lifted(s, down, f, X_WO, p[f], n[f], h, rng, opened)
             if up_a is None or up_b is None:
                 break
-            # straight off each contact first: a joint-space line from a touching tip curves
-            # and can graze the surface; a millimetre-long one off along the normal does not
-            off_a = s.memoised(("off", c.q.tobytes(), c.X_GO.tobytes(), c.p[f].tobytes(), c.n[f].tobytes(), f),
-                               lambda: _off(s, c.q, f, X_WO, c.p[f], c.n[f], rng))
-            off_b = _off(s, down, f, X_WO, p[f], n[f], rng)
+            if off_b is ...:
+                off_b = _off(s, down, f, X_WO, p[f], n[f], rng)
             qs = [c.q] + [x for x in (off_a, up_a, up_b, off_b) if x is not None] + [down]
             segments = list(zip(qs, qs[1:]))
             # coarse first (most tries fail), then as finely as the validator: a distal link
