@@ -42,6 +42,7 @@ from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.motion.blend import trajectory
 from regrasp_cli.motion.timing import evaluate_with_accelerations
 from regrasp_cli.replay import Inputs, follow
+from regrasp_cli.spatial import segment_poses
 from regrasp_cli.store import atomic_write_bytes, atomic_write_text
 from regrasp_cli.trajectory import Plan
 
@@ -132,11 +133,10 @@ def moved_poses(waypoints: np.ndarray, times: np.ndarray, poses: np.ndarray, t: 
     dq = waypoints[k + 1] - waypoints[k]
     dd = np.einsum("ij,ij->i", dq, dq)
     f = np.clip(np.einsum("ij,ij->i", q - waypoints[k], dq) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
-    A, B = poses[k], poses[k + 1]
-    turn = Rotation.from_matrix(np.einsum("kji,kjl->kil", A[:, :3, :3], B[:, :3, :3])).as_rotvec()
-    out = np.tile(np.eye(4), (len(t), 1, 1))
-    out[:, :3, :3] = A[:, :3, :3] @ Rotation.from_rotvec(f[:, None] * turn).as_matrix()
-    out[:, :3, 3] = (1 - f)[:, None] * A[:, :3, 3] + f[:, None] * B[:, :3, 3]
+    out = np.zeros((len(t), 4, 4))
+    for i in np.unique(k):  # each segment's samples at once, as the validator interpolates them
+        at = k == i
+        out[at] = segment_poses(poses[i], poses[i + 1], f[at])
     return out
 
 

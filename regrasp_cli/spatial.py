@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
 
 def pose_matrix(xyz, rpy=None, quat=None) -> np.ndarray:
@@ -69,3 +69,14 @@ def rotation_aligning(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         k[flip] = p / np.linalg.norm(p, axis=1, keepdims=True)
     R = Rotation.from_rotvec(k * np.arctan2(s, c)[:, None]).as_matrix()
     return R[0] if single else R
+
+
+def segment_poses(X_a: np.ndarray, X_b: np.ndarray, ts: np.ndarray) -> np.ndarray:
+    """(k, 4, 4) object poses at the fractions ``ts`` (k,) of the way from ``X_a`` to ``X_b``
+    (4, 4): position linear, rotation slerp; all ``X_b`` when the two are equal.  All at
+    once: a Slerp call costs ~0.3 ms, whatever its number of times."""
+    Xs = np.repeat(X_b[None], len(ts), axis=0)
+    if not np.array_equal(X_a, X_b):
+        Xs[:, :3, :3] = Slerp([0, 1], Rotation.from_matrix(np.stack([X_a[:3, :3], X_b[:3, :3]])))(ts).as_matrix()
+        Xs[:, :3, 3] = (1 - ts)[:, None] * X_a[:3, 3] + ts[:, None] * X_b[:3, 3]
+    return Xs

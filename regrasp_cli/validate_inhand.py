@@ -34,7 +34,7 @@ from time import perf_counter
 
 import numpy as np
 import trimesh
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from regrasp_cli.errors import shown
 from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
@@ -42,6 +42,7 @@ from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import ObjectPlacement, collision_world
 from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.replay import Inputs
+from regrasp_cli.spatial import segment_poses
 from regrasp_cli.trajectory import Phase, Plan
 from regrasp_cli.checks import (CONE_EDGES, NORMAL_TOL, SURFACE_TOL, TIP_TOL, Issue, PhaseSummary, ValidationReport,
                                 continuity_issues, limit_issues, phase_timing_issues, pose_differs, surface_distance)
@@ -57,17 +58,6 @@ def _contact_set(phase: Phase, i: int) -> dict[str, tuple[np.ndarray, np.ndarray
 
 def _same(a: dict, b: dict) -> bool:
     return a.keys() == b.keys() and all(np.allclose(a[f][0], b[f][0], atol=1e-9) for f in a)
-
-
-def segment_poses(X_a: np.ndarray, X_b: np.ndarray, ts: np.ndarray) -> np.ndarray:
-    """(k, 4, 4) object poses at the fractions ``ts`` (k,) of the way from ``X_a`` to ``X_b``
-    (4, 4): position linear, rotation slerp; all ``X_b`` when the two are equal.  All at
-    once: a Slerp call costs ~0.3 ms, whatever its number of times."""
-    Xs = np.repeat(X_b[None], len(ts), axis=0)
-    if not np.array_equal(X_a, X_b):
-        Xs[:, :3, :3] = Slerp([0, 1], Rotation.from_matrix(np.stack([X_a[:3, :3], X_b[:3, :3]])))(ts).as_matrix()
-        Xs[:, :3, 3] = (1 - ts)[:, None] * X_a[:3, 3] + ts[:, None] * X_b[:3, 3]
-    return Xs
 
 
 class _Checker:

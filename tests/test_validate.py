@@ -758,7 +758,7 @@ def test_inhand_segment_poses_follow_the_shortest_turn_and_a_straight_line():
     position on the chord, the last pose the second waypoint's, a still object still."""
     from scipy.spatial.transform import Rotation
 
-    from regrasp_cli.validate_inhand import segment_poses
+    from regrasp_cli.spatial import segment_poses
 
     X_a, X_b = np.eye(4), np.eye(4)
     X_a[:3, :3] = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
