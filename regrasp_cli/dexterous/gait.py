@@ -127,14 +127,14 @@ def lifts_clear(s: GsScratch, qs: list[np.ndarray], f: int, X_WO: np.ndarray, st
     lifted one gets none: leaving, it goes no deeper than it was at its contact, between,
     not in at all, arriving, no deeper than it will be (:data:`LIFT_TOL` for rounding)."""
     last = len(qs) - 2
-    samples, floors = [qs[0], qs[-1]], [np.inf, np.inf]  # the ends first: they set the floors
+    samples, segment = [qs[0], qs[-1]], []  # the ends first: they set the floors
     for i, (a, b) in enumerate(zip(qs, qs[1:])):
         k = max(1, int(np.ceil(np.abs(b - a).max() / step_rad)))
         t = np.linspace(0.0, 1.0, k + 1)[1:-1] if i == last else np.linspace(0.0, 1.0, k + 1)[1:]
         samples += list(a + t[:, None] * (b - a))
-        floors += [i] * len(t)  # the segment, for now
+        segment += [i] * len(t)
     d = tip_clearance(s, np.array(samples), f, X_WO)  # one call: its cost is mostly per call
-    seg = np.array(floors[2:], dtype=int)
+    seg = np.array(segment, dtype=int)
     floor = np.minimum(0.0, np.minimum(np.where(seg == 0, d[0], 0.0), np.where(seg == last, d[1], 0.0))) - LIFT_TOL
     return bool(np.all(d[2:] >= floor))
 
