@@ -382,6 +382,35 @@ def export(plan_file: Path, outputs: tuple[Path, ...], rate: float) -> None:
 
 
 @main.command()
+@click.argument("plan_file", metavar="PLAN", type=click.Path(path_type=Path))
+@click.option("-o", "--output", "report_file", type=click.Path(path_type=Path), default=None, metavar="FILE",
+              help="Also write the report as JSON to FILE.")
+@click.option("--squeeze", type=float, default=None,
+              help="Newtons each contact of a holding hand pushes with, along the surface's inward normal "
+                   "[default: 20].")
+@click.option("--position-tol", type=float, default=None,
+              help="Metres the object may drift from where the plan says it is, in any phase [default: 0.01].")
+@click.option("--angle-tol", type=float, default=None,
+              help="Radians the object may turn from the plan's orientation, in any phase [default: 0.1].")
+@cache_option
+@click.pass_context
+def simulate(ctx: click.Context, plan_file: Path, report_file: Path | None, squeeze: float | None,
+             position_tol: float | None, angle_tol: float | None) -> None:
+    """Check a solved plan in physics (MuJoCo, `pip install 'regrasp[sim]'`): the robot
+    tracks the plan under gravity, the fingers squeeze with a bounded force, and the object
+    is a free body with the plan's friction.  Exit 0 when the object stays within the
+    tolerances of the plan in every phase, 1 when it does not (naming the phase)."""
+    from rich.console import Console
+
+    from regrasp_cli.commands.simulate import print_report, run_simulate
+
+    report = run_simulate(plan_file, report_file, ctx.obj["cache_dir"], squeeze, position_tol, angle_tol)
+    print_report(report, Console())
+    if not report.ok:
+        sys.exit(1)
+
+
+@main.command()
 @click.argument("folder", metavar="DIR", type=click.Path(path_type=Path), required=False)
 @click.option("--force", is_flag=True, help="Overwrite files already in DIR.")
 def examples(folder: Path | None, force: bool) -> None:

@@ -43,11 +43,11 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("roadmap.*",),
     ("trajectory", "replay", "artefacts"),
     ("manip.*", "dexterous.*", "checks", "validate", "validate_inhand"),
-    ("show.*", "bench.*", "export"),
+    ("show.*", "bench.*", "export", "simulate"),
     ("commands.*", "cli"),
 )
 LAYER_NAMES = ("L0 core", "L1 model/grasp/scene/motion", "L2 roadmap", "L3 plan format/replay/artefacts",
-               "L4 planner/validator", "L5 show/bench/export", "L6 commands/cli")
+               "L4 planner/validator", "L5 show/bench/export/simulate", "L6 commands/cli")
 
 # (importer, importer may not import this module or anything under it, unless it is one of these)
 FORBIDDEN: tuple[tuple[str, str, tuple[str, ...], str], ...] = (
@@ -59,6 +59,8 @@ FORBIDDEN: tuple[tuple[str, str, tuple[str, ...], str], ...] = (
     ("validate", "dexterous", (), "the validator is independent of the planner"),
     ("show.*", "validate", (), "the viewer replays plans (replay.py) without the validator"),
     ("export", "manip", ("manip.modes",), "the export samples the plan file, not the planner"),
+    ("simulate", "manip", ("manip.modes",), "the physics check replays the plan file, not the planner"),
+    ("simulate", "validate", (), "the physics check is independent of the validator"),
 )
 
 CLI_MODULES = ("commands.*", "cli")  # the only modules that may print with rich or use click

@@ -1,0 +1,139 @@
+"""`regrasp simulate` (issue 43): the squeeze is an internal force of the grasp, and a
+jaw pinch in MuJoCo holds its object exactly when Coulomb says it can (2 mu F against
+m g); the report names the phase that lost it; bad input is one line, exit code 2."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cli_helpers import SMALL, assert_one_error_line, run
+
+from regrasp_cli.simulate import internal_forces
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENE = ROOT / "configs" / "scenes" / "hironx_onearm.yaml"
+G = 9.81
+
+
+def _check_internal(P, N, F, mu, force):
+    N = N / np.linalg.norm(N, axis=1, keepdims=True)
+    assert np.abs(F.sum(axis=0)).max() < 1e-6 * force
+    torque = np.cross(P - P.mean(axis=0), F).sum(axis=0)
+    assert np.abs(torque).max() < 1e-6 * force
+    fn = -(F * N).sum(axis=1)
+    ft = np.linalg.norm(F + fn[:, None] * N, axis=1)
+    assert np.all(fn > 0) and fn.mean() == pytest.approx(force)
+    # the linearised cone lies inside the true one (8 tangent directions: within 1 / cos(pi / 8))
+    assert np.all(ft <= mu * fn / np.cos(np.pi / 8) + 1e-9)
+
+
+def test_an_antipodal_pinch_squeezes_along_its_normals():
+    P = np.array([[0.02, 0.0, 0.0], [-0.02, 0.0, 0.0]])
+    N = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    F = internal_forces(P, N, 0.5, 20.0)
+    assert np.allclose(F, -20.0 * N, atol=1e-6)
+
+
+def test_three_fingers_on_a_sphere_squeeze_with_no_net_wrench():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a = rng.uniform(0, 2 * np.pi) + np.array([0.0, 2.1, 4.2]) + rng.normal(0, 0.15, 3)
+        z = rng.normal(0, 0.2, 3)
+        N = np.stack([np.cos(a), np.sin(a), z], axis=1)
+        N /= np.linalg.norm(N, axis=1, keepdims=True)
+        P = 0.03 * N
+        _check_internal(P, N, internal_forces(P, N, 0.5, 10.0), 0.5, 10.0)
+
+
+def test_a_pinch_that_needs_more_friction_squeezes_along_the_line_between_its_contacts():
+    """Two contacts 90 degrees apart on a cylinder: the only internal force is along the
+    line joining them, 45 degrees off each normal (it needs mu 1; with 0.5 it will slip)."""
+    P = np.array([[0.02, 0.0, 0.0], [0.0, 0.02, 0.0]])
+    N = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    F = internal_forces(P, N, 0.5, 5.0)
+    line = (P[1] - P[0]) / np.linalg.norm(P[1] - P[0])
+    assert np.allclose(F[0], 5.0 * np.sqrt(2) * line, atol=1e-6) and np.allclose(F[1], -F[0])
+
+
+def test_contacts_that_cannot_squeeze_push_along_their_normals():
+    P = np.array([[0.02, 0.0, 0.0], [0.02, 0.01, 0.0]])
+    N = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])  # side by side on one face
+    assert np.allclose(internal_forces(P, N, 0.5, 5.0), -5.0 * N)
+    assert np.allclose(internal_forces(P[:1], N[:1], 0.5, 5.0), -5.0 * N[:1])
+
+
+@pytest.fixture(scope="module")
+def pinch(tmp_path_factory):
+    """A one-arm plan of HiroNX's jaw (two contacts) and its simulation report."""
+    d = tmp_path_factory.mktemp("simulate")
+    cache = d / "cache"
+    result = run("--cache-dir", cache, "plan", SCENE, "-o", d / "plan.json", *SMALL, "--seed", 0)
+    assert result.exit_code == 0, result.output
+    sim = run("--cache-dir", cache, "simulate", d / "plan.json", "-o", d / "report.json")
+    return d, cache, sim, json.loads((d / "report.json").read_text())
+
+
+def test_a_jaw_pinch_with_the_plan_s_friction_holds(pinch):
+    d, _, sim, report = pinch
+    assert sim.exit_code == 0, sim.output
+    assert "held" in sim.output and report["ok"] is True
+    plan = json.loads((d / "plan.json").read_text())
+    assert [p["name"] for p in report["phases"]] == [p["name"] for p in plan["phases"]]
+    assert all(p["max_position"] <= 0.01 and p["max_angle"] <= 0.1 and not p["dropped"] for p in report["phases"])
+    assert report["tracking_error"] < 1e-3
+
+
+@pytest.mark.parametrize("share", [0.4, 4.0])
+def test_the_pinch_slips_exactly_when_coulomb_says_it_must(pinch, share):
+    """Two contacts pressing F each hold at most 2 mu F: friction for ``share`` times the
+    weight m g slips in the first phase that lifts it (0.4), holds with room to spare (4)."""
+    d, cache, _, report = pinch
+    plan = json.loads((d / "plan.json").read_text())
+    force = report["options"]["squeeze_n"]
+    plan["object"]["friction"] = share * report["object_mass"] * G / (2 * force)
+    copy = d / f"friction-{share}.json"
+    copy.write_text(json.dumps(plan))
+    result = run("--cache-dir", cache, "simulate", copy)
+    lifted = next(p["name"] for p in plan["phases"] if p["holding"] and p["kind"] == "transfer")
+    if share < 1:
+        assert result.exit_code == 1, result.output
+        assert f"NOT HELD in phase {lifted}" in " ".join(result.output.split())
+    else:
+        assert result.exit_code == 0, result.output
+
+
+def test_bad_input_is_one_line_and_writes_nothing(pinch, tmp_path, monkeypatch):
+    d, cache, _, _ = pinch
+    plan = json.loads((d / "plan.json").read_text())
+    out = tmp_path / "report.json"
+
+    def variant(name, **change):
+        p = {**plan, **change}
+        (d / name).write_text(json.dumps(p))
+        return d / name
+
+    old = variant("old.json", format="regrasp.plan/1")
+    assert_one_error_line(run("--cache-dir", cache, "simulate", old, "-o", out), "format")
+    failed = variant("failed.json", status="failed", failure={"stage": "grasps", "reason": "none"})
+    assert_one_error_line(run("--cache-dir", cache, "simulate", failed, "-o", out), "solved")
+    gone = variant("no-mesh.json", object={**plan["object"], "mesh": "missing/block.stl"})
+    assert_one_error_line(run("--cache-dir", cache, "simulate", gone, "-o", out), "mesh")
+    assert_one_error_line(run("simulate", d / "plan.json", "--squeeze", "0"), "--squeeze")
+    assert not out.exists()
+
+    import importlib
+
+    real = importlib.import_module
+
+    def without_mujoco(name, *args):
+        if name == "mujoco":
+            raise ModuleNotFoundError("No module named 'mujoco'", name="mujoco")
+        return real(name, *args)
+
+    monkeypatch.setattr("regrasp_cli.simulate.importlib.import_module", without_mujoco)
+    assert_one_error_line(run("simulate", d / "plan.json", "-o", out), "mujoco", "regrasp[sim]")
+    assert not out.exists()
