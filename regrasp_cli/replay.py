@@ -26,7 +26,7 @@ from regrasp_cli.errors import InputError, StaleArtefactError, shown
 from regrasp_cli.model.collision import CollisionOptions
 from regrasp_cli.model.objects import load_object_mesh
 from regrasp_cli.model.robot import Kinematics, Robot, load_robot
-from regrasp_cli.spatial import inverse
+from regrasp_cli.spatial import inverse, segment_poses
 from regrasp_cli.store import sha256_file
 from regrasp_cli.trajectory import MAX_MAGNITUDE, Plan
 
@@ -230,22 +230,16 @@ class InHandCarry:
     poses: np.ndarray
 
     def X_WO(self, kin: Kinematics, q: np.ndarray) -> np.ndarray:
-        """The pose at the point of the waypoint segments nearest ``q`` (nq,): the
-        position linearly, the rotation nearest the linear blend of the waypoints' (about
-        the same axis; exact at the ends and half-way, within 1e-3 rad of the geodesic's
-        for the tenth of a radian the validator allows between waypoints)."""
+        """The pose at the point of the waypoint segments nearest ``q`` (nq,), at that
+        fraction s of its segment: the position linear, the rotation the slerp
+        (:func:`.spatial.segment_poses`, as the validator and the export move it)."""
         if len(self.waypoints) == 1:
             return self.poses[0]
         a, d = self.waypoints[:-1], np.diff(self.waypoints, axis=0)
         dd = np.einsum("ij,ij->i", d, d)
         s = np.clip(np.einsum("ij,ij->i", q - a, d) / np.where(dd > 0, dd, 1.0), 0.0, 1.0)
         j = int(np.argmin(np.linalg.norm(a + s[:, None] * d - q, axis=1)))
-        A, B, t = self.poses[j], self.poses[j + 1], float(s[j])
-        X = np.eye(4)
-        X[:3, 3] = (1 - t) * A[:3, 3] + t * B[:3, 3]
-        u, _, vt = np.linalg.svd((1 - t) * A[:3, :3] + t * B[:3, :3])  # the nearest rotation
-        X[:3, :3] = u @ vt
-        return X
+        return segment_poses(self.poses[j], self.poses[j + 1], s[j:j + 1])[0]
 
 
 def carry_of(file: Path, plan: Plan, k: int, kin: Kinematics, X_WO: np.ndarray) -> Carry | InHandCarry:

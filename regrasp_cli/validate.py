@@ -31,7 +31,9 @@ its name:
   relative pose: those pairs are checked once, at the phase's first waypoint, not at every
   sample (they are the costliest: the object's mesh against fingertips in contact).
 
-An in-hand plan (task ``inhand``) gets the checks of :mod:`regrasp_cli.validate_inhand`.
+The in-hand kinds (``inhand-transfer``, ``inhand-regrasp``: fingers turning the object, seed
+003) get their kind, object, contact and collision checks from
+:mod:`regrasp_cli.validate_inhand`, whatever else the plan does: one validator for every task.
 
 Malformed, incomplete or stale input raises :class:`~regrasp_cli.errors.InputError`;
 everything else wrong with the plan is an :class:`Issue` of the returned report.
@@ -49,7 +51,7 @@ import pinocchio as pin
 from regrasp_cli.checks import (CONE_EDGES, FINGER_TOL, NORMAL_TOL, SURFACE_TOL, TIP_TOL, Issue, PhaseSummary,
                                 ValidationReport, continuity_issues, limit_issues, phase_timing_issues, pose_differs,
                                 surface_distance)
-from regrasp_cli.errors import InputError, shown
+from regrasp_cli.errors import shown
 from regrasp_cli.grasp.quality import force_closure, primitive_wrenches
 from regrasp_cli.manip.modes import Kind
 from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, collision_world
@@ -60,6 +62,7 @@ from regrasp_cli.parallel import ordered_map
 from regrasp_cli.replay import JOINT_TOL, Carry, Inputs, follow, load_inputs
 from regrasp_cli.spatial import inverse
 from regrasp_cli.trajectory import Phase, Plan, PlanGrasp, read_plan
+from regrasp_cli.validate_inhand import InHandChecks
 
 MAX_COLLISIONS = 3  # per phase: then the phase's collision check stops
 
@@ -336,6 +339,9 @@ def _finger_distance(robot: Robot, hand, finger: int, q: np.ndarray, p_W: np.nda
 def _phase_collisions(j: dict, k: int) -> tuple[list[Issue], int, float]:
     t0 = perf_counter()
     phase, carry, inputs = j["plan"].phases[k], j["carries"][k], j["inputs"]
+    if phase.kind.inhand:
+        found, n = InHandChecks(j["plan"], inputs).collisions(phase, j["resolution"])
+        return found, n, perf_counter() - t0
     reach = j["reach"]
     if carry.hand is not None:  # the held object reaches farther than the robot
         reach = held_reach(inputs.robot, reach, carry.hand, np.asarray(inputs.mesh.vertices), carry.X_PO)
@@ -379,18 +385,15 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         return ValidationReport((Issue(None, None, "status", msg),), 0, {})
 
     inputs = load_inputs(plan, path)
-    if plan.task == "inhand":  # a hand turning the object in its fingers (seed 003)
-        from regrasp_cli.validate_inhand import validate_inhand
-
-        return validate_inhand(plan, path, inputs, resolution, dt)
-    mixed = next((k for k, p in enumerate(plan.phases) if p.kind.inhand), None)
-    if mixed is not None:
-        raise InputError(path, f"phases[{mixed}].kind", f"{plan.phases[mixed].kind.value} phases are checked in an "
-                                                        f"in-hand plan (task 'inhand') only: this version cannot "
-                                                        f"validate them in a {shown(plan.task)} plan")
+    missing = [pid for pid in ("start", "goal") if plan.placement(pid) is None]
+    if missing:
+        return ValidationReport(tuple(Issue(None, None, "attachment", f"the plan records the object's {pid} pose in "
+                                                                      f"placements[] (id {shown(pid)})")
+                                      for pid in missing), 0, {})
     robot, reach, kin = inputs.robot, joint_reach(inputs.robot), Kinematics(inputs.robot)
     issues = [Issue(None, None, "input", note) for note in inputs.notes]
     carries, poses = follow(path, plan, kin)
+    inhand = InHandChecks(plan, inputs)
     per_phase, dts = [], []
     for k, phase in enumerate(plan.phases):
         t0 = perf_counter()
@@ -398,8 +401,10 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         found = continuity_issues(phase, previous, robot.joint_names)
         found += phase_timing_issues(phase, previous, inputs.velocity, inputs.acceleration, dt, robot.joint_names)
         found += limit_issues(phase, robot.joint_names, inputs.lower, inputs.upper)
-        found += attachment_issues(plan, phase, kin, carries[k])
-        found += kind_issues(phase, robot)
+        if phase.kind.inhand:  # the fingers move the object (seed 003)
+            found += inhand.phase_issues(phase)
+        else:
+            found += attachment_issues(plan, phase, kin, carries[k]) + kind_issues(phase, robot)
         before = poses[k - 1] if k else (None, plan.placement("start").X_WO)
         found += object_pose_issues(phase, previous, poses[k], before, carries[k], kin)
         per_phase.append(found)
@@ -423,6 +428,8 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         where = (plan.phases[-1].name, len(plan.phases[-1].waypoints) - 1) if plan.phases else (None, None)
         issues.append(Issue(*where, "attachment", f"the object ends {off} away from its goal placement"))
 
+    if not plan.phases:
+        issues.append(Issue(None, None, "status", "a solved plan has at least one phase"))
     t0 = perf_counter()
     issues += contact_issues(plan, inputs) + fingertip_issues(plan, inputs, poses)
     seconds["grasps"] = perf_counter() - t0

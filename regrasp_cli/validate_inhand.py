@@ -1,20 +1,18 @@
-"""Independent checks of an in-hand plan (task ``inhand``, seed 003): a hand turns the
-object held in its fingertips with ``inhand-transfer`` and ``inhand-regrasp`` phases.
+"""The checks of the in-hand kinds (seed 003): a hand turns the object held in its
+fingertips with ``inhand-transfer`` and ``inhand-regrasp`` phases.  :func:`.validate.validate_plan`
+gives every phase of any plan the checks of its kind; those of these two are here.
 
 Like :mod:`regrasp_cli.validate` it trusts nothing the planner computed (it never imports
-it): it reloads the robot and the object mesh by the plan's hashes and checks, from the
-phases' kinds, per-waypoint object poses and contacts:
+it); from the phases' kinds, per-waypoint object poses and contacts it checks:
 
-* **continuity, timing, limits**: the functions that check every plan
-  (:mod:`regrasp_cli.validate`), a speed grid's velocities and accelerations included;
-* **kind**: every waypoint a stop (no blend: the motion between two is checked
-  straight); only the touching hand's finger joints move (the wrist is fixed); in a
-  transfer no contact changes (each is fixed on the object) and every finger touches; in
-  a regrasp the object stays still, one finger leaves its contact (it is missing from the
-  waypoints between the first and the last), the others keep theirs, and all touch at
-  both ends;
-* **object**: the object's pose never jumps (at most ``step_m`` and ``step_rad`` between
-  waypoints, none between phases), starts at the ``start`` pose and ends at the ``goal``;
+* **kind**: the phase touches one hand and holds none; every waypoint a stop (no blend:
+  the motion between two is checked straight); only the touching hand's finger joints
+  move (the arm holds still); in a transfer no contact changes (each is fixed on the
+  object) and every finger touches; in a regrasp the object stays still, one finger
+  leaves its contact (it is missing from the waypoints between the first and the last),
+  the others keep theirs, and all touch at both ends;
+* **object**: the object's pose never jumps between waypoints (at most ``STEP_M`` and
+  ``STEP_RAD``; between phases and from the start, :func:`.validate.object_pose_issues`);
 * **contacts**, at every waypoint: on the object's surface, the normal along the
   surface's, the fingertip sphere's centre at ``p + r n`` (within :data:`TIP_TOL`), and
   force closure of the fingers in contact (n-1 while one steps; point contacts with the
@@ -29,9 +27,6 @@ phases' kinds, per-waypoint object poses and contacts:
 
 from __future__ import annotations
 
-from pathlib import Path
-from time import perf_counter
-
 import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
@@ -44,8 +39,7 @@ from regrasp_cli.model.robot import Kinematics
 from regrasp_cli.replay import Inputs
 from regrasp_cli.spatial import segment_poses
 from regrasp_cli.trajectory import Phase, Plan
-from regrasp_cli.checks import (CONE_EDGES, NORMAL_TOL, SURFACE_TOL, TIP_TOL, Issue, PhaseSummary, ValidationReport,
-                                continuity_issues, limit_issues, phase_timing_issues, pose_differs, surface_distance)
+from regrasp_cli.checks import CONE_EDGES, NORMAL_TOL, SURFACE_TOL, TIP_TOL, Issue, pose_differs, surface_distance
 
 STEP_M, STEP_RAD = 0.01, 0.1  # the object's largest move between two waypoints: more is a jump
 LIFT_TOL = 1e-5  # m: rounding of a lifted fingertip's distance to the object
@@ -60,7 +54,10 @@ def _same(a: dict, b: dict) -> bool:
     return a.keys() == b.keys() and all(np.allclose(a[f][0], b[f][0], atol=1e-9) for f in a)
 
 
-class _Checker:
+class InHandChecks:
+    """The checks of the in-hand phases of one plan (module docstring), with the force
+    closure and surface tests memoised by contact."""
+
     def __init__(self, plan: Plan, inputs: Inputs):
         self.plan, self.inputs = plan, inputs
         self.robot, self.kin, self.mesh = inputs.robot, Kinematics(inputs.robot), inputs.mesh
@@ -96,11 +93,13 @@ class _Checker:
             self.surface[key] = msg
         return self.surface[key]
 
-    def phase_issues(self, phase: Phase, previous: Phase | None) -> list[Issue]:
+    def phase_issues(self, phase: Phase) -> list[Issue]:
+        """The kind, object and contact checks of the in-hand phase ``phase``."""
         out: list[Issue] = []
-        if not phase.kind.inhand or len(phase.touching) != 1 or phase.holding:
-            return [Issue(phase.name, None, "kind", f"an in-hand plan has only inhand-transfer and inhand-regrasp "
-                                                    f"phases touching one hand; found a {phase.kind.value} phase")]
+        if len(phase.touching) != 1 or phase.holding:
+            return [Issue(phase.name, None, "kind", f"a {phase.kind.value} phase touches one hand and holds none "
+                                                    f"(the fingers hold the object); found touching "
+                                                    f"{list(phase.touching)}, holding {dict(phase.holding)}")]
         if phase.blends is not None and (cut := np.flatnonzero(phase.blends > 0)).size:
             out.append(Issue(phase.name, int(cut[0]), "kind", f"a blend of radius {phase.blends[cut[0]]:.3g}: an "
                                                               "in-hand phase stops at every waypoint (its motion is "
@@ -110,12 +109,8 @@ class _Checker:
         q, X = phase.waypoints, phase.object_poses
         fixed = np.setdiff1d(np.arange(self.robot.nq), hand.idx)
         if np.abs(q[:, fixed] - q[0, fixed]).max(initial=0.0) > FINGER_TOL:
-            out.append(Issue(phase.name, None, "kind", "joints other than the hand's fingers move (the wrist is "
-                                                       "fixed in an in-hand plan)"))
-        if previous is not None and previous.object_poses is not None and \
-                (off := pose_differs(previous.object_poses[-1], X[0])):
-            out.append(Issue(phase.name, 0, "continuity", f"the object jumps by {off} from the end of phase "
-                                                          f"{previous.name}"))
+            out.append(Issue(phase.name, None, "kind", f"joints other than the hand's fingers move (the arm holds "
+                                                       f"still in a {phase.kind.value} phase)"))
         for i in range(1, len(X)):
             dp = float(np.linalg.norm(X[i, :3, 3] - X[i - 1, :3, 3]))
             dr = float(Rotation.from_matrix(X[i - 1, :3, :3].T @ X[i, :3, :3]).magnitude())
@@ -230,7 +225,6 @@ class _Checker:
                                                               f"and {i}")], n
         return [], n
 
-
     def _lifted_clear(self, phase: Phase, f: int, ends: np.ndarray, i: int, ts: np.ndarray,
                       Xs: np.ndarray) -> Issue | None:
         """The lifted fingertip ``f`` on the segment to waypoint ``i`` (samples ``ts``, object
@@ -250,37 +244,3 @@ class _Checker:
             return Issue(phase.name, i, "collision", f"the lifted {name} fingertip goes {-depth.min() * 1000:.3g} mm "
                                                      f"into the object between waypoints {i - 1} and {i}")
         return None
-
-
-def validate_inhand(plan: Plan, path: Path, inputs: Inputs, resolution: float, dt: float) -> ValidationReport:
-    """Check the in-hand plan ``plan`` read from ``path`` (see the module docstring);
-    ``resolution`` (rad) between collision-checked samples, ``dt`` (s) between the
-    timing's samples of a phase with blends."""
-    ch = _Checker(plan, inputs)
-    issues = [Issue(None, None, "input", note) for note in inputs.notes]
-    summaries, seconds = [], {}
-    for k, phase in enumerate(plan.phases):
-        t0 = perf_counter()
-        previous = plan.phases[k - 1] if k else None
-        found = continuity_issues(phase, previous, ch.robot.joint_names)
-        found += phase_timing_issues(phase, previous, inputs.velocity, inputs.acceleration, dt, ch.robot.joint_names)
-        limits = limit_issues(phase, ch.robot.joint_names, inputs.lower, inputs.upper)
-        found += limits + ch.phase_issues(phase, previous)
-        # outside the limits, a segment may be any length: its samples are not drawn
-        hits, n = ch.collisions(phase, resolution) if phase.object_poses is not None and not limits else ([], 0)
-        issues += found + hits
-        dt = perf_counter() - t0
-        seconds[phase.name] = seconds.get(phase.name, 0.0) + dt
-        summaries.append(PhaseSummary(phase.name, phase.kind.value, len(phase.waypoints), n, dt))
-    for pid, k, i in (("start", 0, 0), ("goal", -1, -1)):
-        placement = plan.placement(pid)
-        if placement is None:
-            issues.append(Issue(None, None, "attachment", f"an in-hand plan records the object's {pid} pose in "
-                                                          f"placements[] (id {shown(pid)})"))
-        elif plan.phases and plan.phases[k].object_poses is not None and \
-                (off := pose_differs(plan.phases[k].object_poses[i], placement.X_WO)):
-            issues.append(Issue(plan.phases[k].name, None, "attachment", f"the object is {off} away from its {pid} "
-                                                                         "pose"))
-    if not plan.phases:
-        issues.append(Issue(None, None, "status", "a solved in-hand plan has at least one phase"))
-    return ValidationReport(tuple(issues), sum(s.configurations for s in summaries), seconds, tuple(summaries))

@@ -251,14 +251,18 @@ def test_malformed_plan2_is_one_line_naming_the_field(regrasp, tmp_path, case, c
 
 
 def test_an_inhand_phase_in_a_pick_and_place_plan(regrasp, tmp_path):
-    """`validate` checks in-hand phases in in-hand plans only and says so in one line;
-    `show` draws such a phase, the object at its given poses."""
+    """`validate` gives an in-hand phase of a pick-and-place plan the in-hand checks (one
+    validator, by kind): this one, made from a carry with no contacts and the object at
+    the origin, is refused for both; `show` draws it, the object at its given poses."""
     path, plan = regrasp
     d = copy.deepcopy(plan)
-    field = _inhand(d)
+    _inhand(d)
     bad = _write(path.parent / f"inhand-{tmp_path.name}.json", d)
     result = run("validate", bad)
-    assert_one_error_line(result, str(bad), f": {field}: ", "in-hand plan (task 'inhand') only")
+    assert result.exit_code == 1, result.output
+    name = d["phases"][2]["name"]
+    assert re.search(rf"^kind {name}\[0\]: in a transfer every finger touches", result.stdout, re.M), result.stdout
+    assert re.search(rf"^attachment {name}\[0\]: the object jumps by", result.stdout, re.M), result.stdout
     frames = tmp_path / "frames"
     result = run("show", bad, "--png", frames)
     assert result.exit_code == 0, result.output
