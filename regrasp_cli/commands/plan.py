@@ -22,7 +22,7 @@ from regrasp_cli.manip.context import OnlineOptions
 from regrasp_cli.manip.ompl_peer import ompl_version
 from regrasp_cli.manip.queries import Roadmap
 from regrasp_cli.manip.record import make_plan
-from regrasp_cli.manip.solve import Outcome
+from regrasp_cli.manip.solve import Outcome, ends_failure
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.manip.tasks import handover, manipulation
 from regrasp_cli.roadmap.build import RoadmapOptions
@@ -81,7 +81,7 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     seed = problem.spec.planning.seed if seed is None else seed
     options = OnlineOptions(planner=planner, jobs=jobs)
     lists, art, hashes, stable = {}, None, {}, []
-    failure = handover.ends_failure(problem, options)  # before building anything for them
+    failure = ends_failure(problem, options)  # whatever the style: before building anything for them
     if failure is None:  # milliseconds: before the grasp lists
         stable, sha = placements_for_style(style, cache_dir, problem, build, CliBuilder(console))
         if sha is not None:

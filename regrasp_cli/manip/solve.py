@@ -117,10 +117,12 @@ class Outcome:
         return float(sum(self.stages.values()))
 
 
-def check_ends(scratch: Scratch, ends) -> None:
-    """Each (q, X_WO, what) of ``ends`` free, and with the queries' clearance: nothing else
-    matters if the robot starts in collision.  Raises PlanningFailed(Stage.ENDS)."""
-    for q, X, what in ends:
+def check_ends(scratch: Scratch) -> None:
+    """The robot's start and goal configurations (the object at its start and goal)
+    free, and with the queries' clearance: nothing else matters if the robot starts in
+    collision, whatever the task.  Raises PlanningFailed(Stage.ENDS)."""
+    p, task = scratch.problem, scratch.problem.spec.task
+    for q, X, what in ((p.q_start, task.X_WO_start, "start"), (p.q_goal, task.X_WO_goal, "goal")):
         plain = scratch.world(X)
         for world, fault in ((plain, "is in collision"),
                              (scratch.certified(plain), f"is closer than {1000 * scratch.local.margin:g} mm to an "
@@ -129,6 +131,17 @@ def check_ends(scratch: Scratch, ends) -> None:
                 pairs = ", ".join("-".join(p) for p in world.colliding_pairs(q)[:3])
                 need = "" if world is plain else "; the query checks need that clearance"
                 raise PlanningFailed(Stage.ENDS, f"the robot's {what} configuration {fault} ({pairs}){need}")
+
+
+def ends_failure(problem, options) -> PlanningFailed | None:
+    """Why :func:`check_ends` fails for ``problem`` (a :class:`~regrasp_cli.scene.Problem`)
+    with ``options`` (:class:`~manip.context.OnlineOptions`), or None: for callers to ask
+    before they load or build any artefact."""
+    try:
+        check_ends(Scratch(problem, options))
+    except PlanningFailed as exc:
+        return exc
+    return None
 
 
 def _query_job(j: dict, i: int) -> QueryResult:

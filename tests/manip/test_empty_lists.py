@@ -7,6 +7,7 @@ import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip.context import OnlineOptions
+from regrasp_cli.manip.solve import ends_failure
 from regrasp_cli.manip.status import Stage
 from regrasp_cli.manip.tasks import handover
 
@@ -28,4 +29,4 @@ def test_an_empty_grasp_list_fails_at_grasps_naming_the_hand(problem):
 
 
 def test_ends_failure_is_none_for_free_ends(problem):
-    assert handover.ends_failure(problem, OnlineOptions(jobs=1)) is None
+    assert ends_failure(problem, OnlineOptions(jobs=1)) is None

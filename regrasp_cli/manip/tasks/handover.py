@@ -29,6 +29,7 @@ import time
 import numpy as np
 
 from regrasp_cli.grasp.build import GraspList
+from regrasp_cli.manip import steps as moves
 from regrasp_cli.manip.context import OnlineOptions, Scratch
 from regrasp_cli.manip.doublegrasp import DoubleGrasp, double_grasps, empty_list_reason, pairable, partners, \
     single_configurations, workable
@@ -36,7 +37,6 @@ from regrasp_cli.manip.exchange import exchange_orientation, exchange_position
 from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_static, hand_shapes, single_shape, \
     palm_and_finger_links, static_geometry
 from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, approach_axis, exchange_configuration, shoulder, wrist
-from regrasp_cli.manip.modes import Kind, Mode, Transition
 from regrasp_cli.manip.ompl_peer import ompl_version
 from regrasp_cli.manip.queries import PhaseWorlds, Roadmap
 from regrasp_cli.manip.solve import Outcome, Query, Step, TransitionStats, check_ends, solve_queries, time_steps
@@ -61,22 +61,6 @@ def grasp_id(lists: dict[str, GraspList], hand: str, k: int) -> str:
     """The plan's id of grasp ``k`` of ``hand``'s list: the hand and its index in the
     cached list (``lists`` may hold a scene's subset of it, :mod:`grasp.usable`)."""
     return f"{hand}-{lists[hand].stored_index(k)}"
-
-
-def mode_path(g: str, t: str, gid_g: str, gid_t: str) -> list[Transition]:
-    """The hand-over's transitions: ``g`` picks with grasp ``gid_g`` and gives the object
-    to ``t``, which places it with ``gid_t``."""
-    start, goal = Mode.resting("start"), Mode.resting("goal")
-    held_g, held_t = Mode.held(**{g: gid_g}), Mode.held(**{t: gid_t})
-    both = Mode.held(**{g: gid_g, t: gid_t})
-    return [Transition(Kind.TRANSIT, start, start, "grasp"),
-            Transition(Kind.GRASP, start, held_g, f"close_{g}", (g,)),
-            Transition(Kind.TRANSFER, held_g, held_g, "carry"),
-            Transition(Kind.HANDOVER, held_g, both, f"close_{t}", (t,)),
-            Transition(Kind.HANDOVER, both, held_t, f"open_{g}", (g,)),
-            Transition(Kind.TRANSFER, held_t, held_t, "place"),
-            Transition(Kind.RELEASE, held_t, goal, f"open_{t}", (t,)),
-            Transition(Kind.TRANSIT, goal, goal, "rest")]
 
 
 def picking_hand(problem: Problem, scratch: Scratch) -> str:
@@ -354,8 +338,8 @@ def exchange_near(scratch: Scratch, rng: np.random.Generator, dg: DoubleGrasp, l
 
 def steps_of(scratch: Scratch, dg: DoubleGrasp, ex: ExchangeConfig,
              lists: dict[str, GraspList]) -> tuple[list[Step], list[Query]]:
-    """The mode path with its fixed pieces (key configurations and their lines) and the
-    four queries between them."""
+    """The mode path (:mod:`manip.steps`' arrive, hand-over and leave) with its fixed
+    pieces (key configurations and their lines) and the four queries between them."""
     problem = scratch.problem
     robot, task = problem.robot, problem.spec.task
     sg, st = dg.giver, dg.taker
@@ -369,13 +353,10 @@ def steps_of(scratch: Scratch, dg: DoubleGrasp, ex: ExchangeConfig,
         "place": (ex.retreat[-1], st.lift[-1], phase_worlds(scratch, X_GO[t], t, {g: open_[g], t: closed[t]})),
         "rest": (st.approach[0], problem.q_goal, phase_worlds(scratch, task.X_WO_goal, None, open_)),
     }
-    pieces = [("grasp", sg.approach), (sg.approach[-1:], sg.q_closed[None]), (sg.lift, "carry", ex.approach),
-              (ex.approach[-1:], ex.q_both[None]), (ex.q_both[None], ex.q_release[None]),
-              (ex.retreat, "place", st.lift[::-1]), (st.q_closed[None], st.approach[-1:]),
-              (st.approach[::-1], "rest")]
-    path = mode_path(g, t, grasp_id(lists, g, sg.grasp), grasp_id(lists, t, st.grasp))
-    return ([Step(tr, p) for tr, p in zip(path, pieces)],
-            [Query(name, *queries[name]) for name in RUN_ORDER])
+    gid_g, gid_t = grasp_id(lists, g, sg.grasp), grasp_id(lists, t, st.grasp)
+    steps = (moves.arrive("grasp", sg, gid_g, "start") + moves.handover("carry", "place", sg, gid_g, ex, st, gid_t)
+             + moves.leave("rest", st, gid_t, "goal"))  # the graph's path arrive, hand-over, leave
+    return steps, [Query(name, *queries[name]) for name in RUN_ORDER]
 
 
 def _keys_and_paths(scratch: Scratch, roadmap: Roadmap | None, weights: np.ndarray, seed: int,
@@ -452,25 +433,9 @@ def _checks(scratch: Scratch, counts: dict) -> int:
     return scratch.checks + (workers if scratch.options.jobs > 1 else 0)
 
 
-def _ends(problem: Problem) -> list[tuple[np.ndarray, np.ndarray, str]]:
-    task = problem.spec.task
-    return [(problem.q_start, task.X_WO_start, "start"), (problem.q_goal, task.X_WO_goal, "goal")]
-
-
 def _placements(problem: Problem) -> dict[str, np.ndarray]:
     task = problem.spec.task
     return {"start": task.X_WO_start, "goal": task.X_WO_goal}
-
-
-def ends_failure(problem: Problem, options: OnlineOptions) -> PlanningFailed | None:
-    """Why the robot's start or goal configuration cannot be planned from (in collision,
-    naming the pairs, or without the queries' clearance), or None: the check :func:`plan`
-    starts with, for callers to make before loading or building any artefact."""
-    try:
-        check_ends(Scratch(problem, options), _ends(problem))
-    except PlanningFailed as exc:
-        return exc
-    return None
 
 
 def failed(problem: Problem, failure: PlanningFailed) -> Outcome:
@@ -492,7 +457,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     clock, counts, table = dict.fromkeys(STAGES, 0.0), {}, {}
     t0 = time.perf_counter()
     try:
-        check_ends(scratch, _ends(problem))
+        check_ends(scratch)
         try:
             g, doubles, c = choose_hands(scratch, lists, seed, known)
             counts.update(c)

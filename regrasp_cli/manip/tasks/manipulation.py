@@ -42,12 +42,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from regrasp_cli.grasp.build import GraspList
+from regrasp_cli.manip import steps as moves
 from regrasp_cli.manip.context import OnlineOptions, Scratch
 from regrasp_cli.manip.doublegrasp import DoubleGrasp, cheap_order, empty_list_reason, single_configurations, workable
 from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, ruled_out, \
     search, style_of, successors
 from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, SingleConfig, shoulder, single_configuration
-from regrasp_cli.manip.modes import Kind, Mode, Transition
 from regrasp_cli.manip.queries import Roadmap
 from regrasp_cli.manip.solve import Outcome, Query, Step, TransitionStats, check_ends, solve_queries, time_steps
 from regrasp_cli.manip.status import PlanningFailed, Stage
@@ -463,52 +463,25 @@ def intermediate_placements(fitted: Fitted, faces: int, options: GraphOptions, h
 
 def steps_of(g: _Graph, path: list[Edge], labels: list[str]) -> list[Step]:
     """The path's transitions with their fixed pieces (approach, lift, exchange lines) and
-    query labels, in order."""
+    query labels, in order (each edge kind's in :mod:`manip.steps`)."""
     steps = []
 
-    def held(n: Node) -> Mode:
-        return Mode.held(**{n.hand: grasp_id(g.lists, n.hand, n.grasp)})
-
-    def release(n: Node) -> None:
-        c = g.configs[n]
-        steps.append(Step(Transition(Kind.RELEASE, held(n), Mode.resting(n.placement), f"open_{n.hand}", (n.hand,)),
-                          (c.q_closed[None], c.approach[-1:])))
-
-    def grasp(n: Node) -> None:
-        c = g.configs[n]
-        steps.append(Step(Transition(Kind.GRASP, Mode.resting(n.placement), held(n), f"close_{n.hand}", (n.hand,)),
-                          (c.approach[-1:], c.q_closed[None])))
+    def gid(n: Node) -> str:
+        return grasp_id(g.lists, n.hand, n.grasp)
 
     for e, label in zip(path, labels):
         ca = g.configs.get(e.a) if e.a is not None else None
         cb = g.configs.get(e.b) if e.b is not None else None
         if e.kind == EdgeKind.ARRIVE:
-            rest = Mode.resting(START)
-            steps.append(Step(Transition(Kind.TRANSIT, rest, rest, label), (label, cb.approach)))
-            grasp(e.b)
+            steps += moves.arrive(label, cb, gid(e.b), START)
         elif e.kind == EdgeKind.TRANSFER:
-            steps.append(Step(Transition(Kind.TRANSFER, held(e.a), held(e.a), label), (ca.lift, label, cb.lift[::-1])))
+            steps += moves.transfer(label, ca, cb, gid(e.a))
         elif e.kind == EdgeKind.REGRASP:
-            release(e.a)
-            rest = Mode.resting(e.a.placement)
-            steps.append(Step(Transition(Kind.TRANSIT, rest, rest, label), (ca.approach[::-1], label, cb.approach)))
-            grasp(e.b)
+            steps += moves.regrasp(label, ca, gid(e.a), cb, gid(e.b), e.a.placement)
         elif e.kind == EdgeKind.HANDOVER:
-            ex = g.exchanges[e]
-            a, b = e.a.hand, e.b.hand
-            both = Mode.held(**{a: grasp_id(g.lists, a, e.a.grasp), b: grasp_id(g.lists, b, e.b.grasp)})
-            steps += [Step(Transition(Kind.TRANSFER, held(e.a), held(e.a), label + ":carry"),
-                           (ca.lift, label + ":carry", ex.approach)),
-                      Step(Transition(Kind.HANDOVER, held(e.a), both, f"close_{b}", (b,)),
-                           (ex.approach[-1:], ex.q_both[None])),
-                      Step(Transition(Kind.HANDOVER, both, held(e.b), f"open_{a}", (a,)),
-                           (ex.q_both[None], ex.q_release[None])),
-                      Step(Transition(Kind.TRANSFER, held(e.b), held(e.b), label + ":place"),
-                           (ex.retreat, label + ":place", cb.lift[::-1]))]
+            steps += moves.handover(label + ":carry", label + ":place", ca, gid(e.a), g.exchanges[e], cb, gid(e.b))
         else:  # LEAVE
-            release(e.a)
-            rest = Mode.resting(GOAL)
-            steps.append(Step(Transition(Kind.TRANSIT, rest, rest, label), (ca.approach[::-1], label)))
+            steps += moves.leave(label, ca, gid(e.a), GOAL)
     return steps
 
 
@@ -613,7 +586,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     task = problem.spec.task
     scratch = Scratch(problem, options, roadmap.unchecked if roadmap is not None else ())
     try:
-        check_ends(scratch, [(problem.q_start, task.X_WO_start, "start"), (problem.q_goal, task.X_WO_goal, "goal")])
+        check_ends(scratch)
         for h in HANDS:
             if len(lists[h]) == 0:
                 raise PlanningFailed(Stage.GRASPS, empty_list_reason(h))
