@@ -370,24 +370,24 @@ def _ramp(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
 
 
 def _pushes(plan: Plan, inputs: Inputs, samples: Samples,
-            force: float) -> list[list[tuple[str, str, np.ndarray, float]]]:
+            force: float) -> list[list[tuple[str, str, np.ndarray, float, np.ndarray]]]:
     """Per sample, the contacts that squeeze: (hand, finger, force on the object in O (3,)
-    N, weight in [0, 1]), the forces :func:`internal_forces` of the contacts held.  A
+    N, weight in [0, 1], the contact point in O (3,) m), the forces :func:`internal_forces` of the contacts held.  A
     holding hand's grasp at full weight; a hand closing on the object (touching now,
     holding next) ramped up over the phase, one opening off it ramped down; in-hand, the
     fingers on their contacts at both ends of a segment at full weight (the stance), a
     finger leaving or arriving pushes along its normal, ramped."""
     robot = inputs.robot
     mu = inputs.friction
-    out: list[list[tuple[str, str, np.ndarray, float]]] = [[] for _ in samples.t]
-    squeezes: dict[str, list[tuple[str, str, np.ndarray]]] = {}
+    out: list[list[tuple[str, str, np.ndarray, float, np.ndarray]]] = [[] for _ in samples.t]
+    squeezes: dict[str, list[tuple[str, str, np.ndarray, np.ndarray]]] = {}
 
-    def grasp_pushes(hand: str, gid: str) -> list[tuple[str, str, np.ndarray]]:
+    def grasp_pushes(hand: str, gid: str, w: float) -> list[tuple[str, str, np.ndarray, float, np.ndarray]]:
         if gid not in squeezes:
             c = inputs.contacts[gid]
             F = internal_forces(c.points, c.normals, mu, force)
-            squeezes[gid] = [(hand, f, F_i) for f, F_i in zip(c.fingers, F)]
-        return squeezes[gid]
+            squeezes[gid] = [(hand, f, F_i, p_i) for f, F_i, p_i in zip(c.fingers, F, c.points)]
+        return [(h, f, F_i, w, p_i) for h, f, F_i, p_i in squeezes[gid]]
 
     for k, p in enumerate(plan.phases):
         at = np.flatnonzero(samples.phase == k)
@@ -398,7 +398,7 @@ def _pushes(plan: Plan, inputs: Inputs, samples: Samples,
         after = plan.phases[k + 1].holding if k + 1 < len(plan.phases) else {}
         for hand, gid in p.holding.items():
             for i in at:
-                out[i] += [(*x, 1.0) for x in grasp_pushes(hand, gid)]
+                out[i] += grasp_pushes(hand, gid, 1.0)
         if p.contacts is not None:
             hand_of = {f.name: h for h in p.touching for f in robot.hands[h].spec.fingers}
             seg = np.clip(np.searchsorted(p.times, t, side="right") - 1, 0, len(p.times) - 2)
@@ -413,12 +413,13 @@ def _pushes(plan: Plan, inputs: Inputs, samples: Samples,
                 a, b, F = stance[j]
                 s = float(_ramp(np.array(tt), p.times[j], p.times[j + 1]))
                 for f in sorted(a.keys() | b.keys()):
+                    c = a.get(f) or b[f]
                     if f in F:
-                        out[i].append((hand_of[f], f, F[f], 1.0))
+                        out[i].append((hand_of[f], f, F[f], 1.0, np.asarray(c["point"], float)))
                     else:
-                        n = np.asarray((a.get(f) or b[f])["normal"], float)
+                        n = np.asarray(c["normal"], float)
                         out[i].append((hand_of[f], f, -force * n / max(np.linalg.norm(n), 1e-12),
-                                       1.0 - s if f in a else s))
+                                       1.0 - s if f in a else s, np.asarray(c["point"], float)))
             continue
         for hand in p.touching:
             if hand in p.holding:
@@ -430,15 +431,16 @@ def _pushes(plan: Plan, inputs: Inputs, samples: Samples,
             else:
                 continue
             for i, wi in zip(at, w):
-                out[i] += [(*x, float(wi)) for x in grasp_pushes(hand, gid)]
+                out[i] += grasp_pushes(hand, gid, float(wi))
     return out
 
 
 def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float) -> np.ndarray:
     """(m, nq) joint torques (N m or N) per sample: each squeezing contact (:func:`_pushes`)
-    pushes with its force (at most ``force`` N) times its weight, turned into W by the
-    plan's object pose, through its finger's joints only, tau = J^T f at the plan's
-    configuration."""
+    pushes with its force (``force`` N on average) times its weight, turned into W by the
+    plan's object pose, at its contact point, through its finger's joints only:
+    tau = J_c^T f at the plan's configuration, J_c the Jacobian of the point of the
+    finger's last link at the contact (a pad's contact is not its frame's origin)."""
     robot = inputs.robot
     model = robot.model
     data = model.createData()
@@ -451,13 +453,15 @@ def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float) 
         qp = robot.to_pin(samples.q[i])
         pin.computeJointJacobians(model, data, qp)
         pin.updateFramePlacements(model, data)
-        R_WO = samples.X_WO[i][:3, :3]
-        for hand, finger, F_O, w in push:
+        X_WO = samples.X_WO[i]
+        for hand, finger, F_O, w, p_O in push:
             h = robot.hands[hand]
             f = [x.name for x in h.spec.fingers].index(finger)
-            J = pin.getFrameJacobian(model, data, h.tip_frames[f], pin.LOCAL_WORLD_ALIGNED)[:3]
+            J = pin.getFrameJacobian(model, data, h.tip_frames[f], pin.LOCAL_WORLD_ALIGNED)
+            r = X_WO[:3, :3] @ p_O + X_WO[:3, 3] - data.oMf[h.tip_frames[f]].translation
+            J_c = J[:3] - pin.skew(r) @ J[3:]  # v + w x r of the point at r from the frame
             idx = h.finger_idx[f]
-            tau[i, idx] += J[:, v_of[idx]].T @ (w * R_WO @ F_O)
+            tau[i, idx] += J_c[:, v_of[idx]].T @ (w * X_WO[:3, :3] @ F_O)
     return tau
 
 

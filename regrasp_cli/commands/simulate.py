@@ -64,7 +64,8 @@ def print_report(r: SimReport, console: Console) -> None:
     t = Table(title=f"Simulation (object {r.object_mass:.3f} kg, {r.object_parts} convex parts, squeeze "
                     f"{r.options.squeeze_n:g} N per contact)")
     for col in ("phase", "kind", "s", "drift mm", "angle rad", "end mm", "dropped", "ok"):
-        t.add_column(col, justify="left" if col in ("phase", "kind") else "right", no_wrap=col in ("phase", "kind"))
+        t.add_column(col, justify="left" if col in ("phase", "kind") else "right", no_wrap=col != "phase",
+                     overflow="fold")
     for p in r.phases:
         t.add_row(escape(p.name), p.kind, f"{p.t1 - p.t0:.2f}", f"{p.max_position * 1000:.1f}", f"{p.max_angle:.3f}",
                   f"{p.end_position * 1000:.1f}", "yes" if p.dropped else "", "yes" if p.ok else "NO")
