@@ -260,7 +260,7 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
               help="Nodes per elementary roadmap of the roadmap to use (built if missing).")
 @click.option("--grasp-target", type=int, default=None,
               help="Target size of the grasp lists to use (built if missing; default 120).")
-@click.option("--style", type=click.Choice(["auto", "one-arm", "handover", "place-regrasp", "seed000"]),
+@click.option("--style", type=click.Choice(["auto", "one-arm", "handover", "inhand", "place-regrasp", "seed000"]),
               default="auto", show_default=True,
               help="auto: the manipulation with the fewest regrasps (one arm, hand-overs, intermediate placements); "
                    "or only one arm, only hand-overs, only intermediate placements; seed000: the fixed hand-over "

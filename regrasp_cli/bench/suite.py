@@ -33,7 +33,7 @@ DEFAULT_SEEDS = 20
 DEFAULT_BUDGET_S = 60.0
 DEFAULT_ITERATIONS = 3000  # OnlineOptions().rrt.max_iterations
 MAX_SEEDS = 10_000  # runs per scene and planner: 10,000 plans of 2 s are most of a day already
-STYLES = ("auto", "one-arm", "handover", "place-regrasp", "seed000")  # regrasp plan --style
+STYLES = ("auto", "one-arm", "handover", "inhand", "place-regrasp", "seed000")  # regrasp plan --style
 SAMPLERS = ("faces", "vis-prm")  # regrasp plan --sampler
 _FILE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")  # one path component, never '..'
 

@@ -37,27 +37,35 @@ def _times(q: np.ndarray, t0: float, velocity: np.ndarray, acceleration: np.ndar
     return t0 + np.r_[0.0, np.cumsum(d)]
 
 
+def piece_motions(pieces, names: list[str], X_WG: np.ndarray) -> list[tuple]:
+    """Per piece (:class:`~dexterous.gait.Transfer` or :class:`~dexterous.gait.Regrasp`),
+    its kind, label, waypoints (k, nq), the object's poses (k, 4, 4) in W (the hand's grasp
+    frame at ``X_WG``) and the contacts at each waypoint (the fingers ``names``)."""
+    out = []
+    for k, piece in enumerate(pieces):
+        if isinstance(piece, Transfer):
+            X = X_WG @ piece.X_GO
+            c = _contacts(names, piece.p, piece.n)
+            out.append((Kind.INHAND_TRANSFER, f"turn {k}", piece.q, X, tuple(c for _ in X)))
+        else:
+            assert isinstance(piece, Regrasp)
+            X = np.repeat((X_WG @ piece.before.X_GO)[None], len(piece.q), axis=0)
+            before, after = piece.before, piece.after
+            lifted = _contacts(names, before.p, before.n, skip=piece.finger)
+            contacts = (_contacts(names, before.p, before.n),) + (lifted,) * (len(piece.q) - 2) + (
+                _contacts(names, after.p, after.n),)
+            out.append((Kind.INHAND_REGRASP, f"{names[piece.finger]} steps {k}", piece.q, X, contacts))
+    return out
+
+
 def phases(problem: InhandProblem, out: InhandOutcome) -> tuple[Phase, ...]:
     robot, hand = problem.robot, problem.hand
     names = [f.name for f in robot.hands[hand].spec.fingers]
     acc = np.full(robot.nq, ACCELERATION)
     result, t = [], 0.0
-    for k, piece in enumerate(out.pieces):
-        if isinstance(piece, Transfer):
-            X = out.X_WG @ piece.X_GO
-            c = _contacts(names, piece.p, piece.n)
-            contacts = tuple(c for _ in X)
-            kind, label = Kind.INHAND_TRANSFER, f"turn {k}"
-        else:
-            assert isinstance(piece, Regrasp)
-            X = np.repeat((out.X_WG @ piece.before.X_GO)[None], len(piece.q), axis=0)
-            before, after = piece.before, piece.after
-            lifted = _contacts(names, before.p, before.n, skip=piece.finger)
-            contacts = (_contacts(names, before.p, before.n),) + (lifted,) * (len(piece.q) - 2) + (
-                _contacts(names, after.p, after.n),)
-            kind, label = Kind.INHAND_REGRASP, f"{names[piece.finger]} steps {k}"
-        times = _times(piece.q, t, robot.velocity, acc)
-        result.append(Phase(label, kind, {}, (hand,), None, piece.q, times, X, contacts))
+    for kind, label, q, X, contacts in piece_motions(out.pieces, names, out.X_WG):
+        times = _times(q, t, robot.velocity, acc)
+        result.append(Phase(label, kind, {}, (hand,), None, q, times, X, contacts))
         t = float(times[-1])
     return tuple(result)
 

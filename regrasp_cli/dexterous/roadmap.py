@@ -401,7 +401,7 @@ def connect(s: GsScratch, a: GsConfig, b: GsConfig, rng: np.random.Generator, o:
 
 def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.Generator,
                  o: GaitTreeOptions = GaitTreeOptions(), g: GaitOptions = GaitOptions(),
-                 progress: Callable[[], None] | None = None
+                 progress: Callable[[], None] | None = None, exact: bool = False
                  ) -> tuple[list[Piece] | None, tuple[Tree, Tree], RoadmapStats]:
     """Two trees, from ``start`` and from ``goal`` (a grasp at the goal pose), grown by
     :func:`join_trees`: the start tree's path to its node, the join and the goal tree's
@@ -409,12 +409,14 @@ def grow_connect(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
     grasp at its pose); or None within ``o.nodes`` expansions.  (The single-query version
     of §V adds both configurations to the graph; our goal is a pose, any grasp there will
     do, so ``goal`` is one such grasp, and a start-tree node at the goal pose ends the
-    search as in :func:`grow`.)  ``progress()`` is called after each expansion."""
+    search as in :func:`grow`; with ``exact``, the path ends at ``goal`` itself: the
+    grasp a regrasp of the manipulation graph must end with.)  ``progress()`` is called
+    after each expansion."""
     trees = (Tree(), Tree())
     trees[0].add(start, -1, [])
     trees[1].add(goal, -1, [])
     stats = RoadmapStats(start_liftable=len(s.liftable(start)))
-    joined = join_trees(s, trees, rng, o, g, stats, at_goal=True, progress=progress)
+    joined = join_trees(s, trees, rng, o, g, stats, at_goal=not exact, progress=progress)
     stats.kept = len(trees[0].nodes) + len(trees[1].nodes)
     if joined is None:
         return None, trees, stats

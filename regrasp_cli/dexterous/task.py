@@ -102,24 +102,41 @@ class InhandOutcome:
 
 
 def scratch(problem: InhandProblem, cache_dir: Path | None, rng: np.random.Generator) -> GsScratch:
-    """What the planner checks GS_n with: the hand model with the object, the fingers'
-    workspaces, the surface sampled every half fingertip radius, the triangulated one."""
-    robot, hand = problem.robot, problem.hand
-    mesh = problem.object.mesh
-    hm = HandModel(robot, hand, mesh, problem.disabled.links(), CONTACT_TOLERANCE)
-    hm.q = problem.q_fixed.copy()
+    """What the planner checks GS_n with (:func:`gs_scratch`) for the in-hand scene's problem."""
+    return gs_scratch(problem.robot, problem.hand, problem.object.mesh, problem.disabled.links(), problem.q_fixed,
+                      problem.obstacles, problem.spec.object.friction, cache_dir, rng)
+
+
+def gs_scratch(robot: Robot, hand: str, mesh, disabled_links, q_fixed: np.ndarray, obstacles: tuple[ObstacleSpec, ...],
+               friction: float, cache_dir: Path | None, rng: np.random.Generator) -> GsScratch:
+    """What the planner checks GS_n with: the hand model with the object (the robot at
+    ``q_fixed`` (nq,), the wrist held there), the fingers' workspaces, the surface sampled
+    every half fingertip radius, the triangulated one; ``obstacles`` posed in W."""
+    hm = HandModel(robot, hand, mesh, disabled_links, CONTACT_TOLERANCE)
+    hm.q = np.array(q_fixed, float)
     hm.X_WG = Kinematics(robot).fk(hm.q, robot.hands[hand].grasp_frame)
     ws = hand_workspace(robot, hand, cache_dir=cache_dir)
     tip = min(f.tip_radius for f in robot.hands[hand].spec.fingers)
     sampled = build_surface(mesh, 0.5 * tip, rng)
     rho = float(np.linalg.norm(mesh.vertices - sampled.mass_centre, axis=1).max())
     world = None
-    if problem.obstacles:  # checked as the validator does, with the object touched by this hand only
-        world = collision_world(robot, problem.obstacles, problem.disabled.links(),
-                                ObjectPlacement(mesh, hm.X_WG, None, (hand,)),
+    if obstacles:  # checked as the validator does, with the object touched by this hand only
+        world = collision_world(robot, obstacles, disabled_links, ObjectPlacement(mesh, hm.X_WG, None, (hand,)),
                                 CollisionOptions(CONTACT_TOLERANCE, CONTACT_TOLERANCE))
-    return GsScratch(hm, ws, sampled, MeshSurface.of(mesh), rho, GsOptions(friction=problem.spec.object.friction),
-                     world=world)
+    return GsScratch(hm, ws, sampled, MeshSurface.of(mesh), rho, GsOptions(friction=friction), world=world)
+
+
+def turn_in_hand(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.Generator,
+                 options: GaitTreeOptions = GaitTreeOptions(), gait: GaitOptions = GaitOptions(),
+                 smoothing: bool = True) -> list[Piece] | None:
+    """The transfers and finger regrasps that take the object held in ``start`` to exactly
+    ``goal`` (its pose and contacts: another grasp of the hand), the wrist fixed (seed 003,
+    the two-tree search of :func:`plan_inhand` ending at ``goal`` itself); None within the
+    budget.  A regrasp move of the manipulation graph (:mod:`manip.graph`, ``inhand``)."""
+    pieces, _, _ = grow_connect(s, start, goal, rng, options, gait, exact=True)
+    if pieces is None or not smoothing:
+        return pieces
+    return smooth(s, pieces, rng, gait)
 
 
 def _check_size(problem: InhandProblem, s: GsScratch) -> None:

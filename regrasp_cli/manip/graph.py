@@ -16,10 +16,14 @@ A :class:`Node` is a configuration of CG_h∩CP: hand ``h`` holds the object wit
 * ``handover``: hand ``a`` lifts the object from its placement, hands it to the other
   hand in the air (CG_r∩CG_l, the exchange of Saut et al. 2010), which puts it down at
   its placement;
+* ``inhand``: the hand lifts the object from its placement with one grasp, turns it in
+  its fingers to another grasp of the same hand by finger gaiting while the arm holds
+  still (seed 003), and puts it down at its placement: for hands that can gait (three
+  or more fingertips, both grasps touching with every finger);
 * ``leave``: from a node at ``goal``, the hand opens and the robot goes to its goal
   configuration.
 
-A ``regrasp`` or ``handover`` edge changes the grasp: the search minimises their number
+A ``regrasp``, ``handover`` or ``inhand`` edge changes the grasp (one regrasp each): the search minimises their number
 first and the path length second (Dijkstra on the pair), over edges not yet found
 infeasible.  The graph is lazy: a task proposes the best path, solves its motions, and
 blocks the edges that fail, as Saut et al. 2010's lazy revalidation does for paths
@@ -43,11 +47,12 @@ class EdgeKind(str, Enum):
     TRANSFER = "transfer"
     REGRASP = "regrasp"
     HANDOVER = "handover"
+    INHAND = "inhand"
     LEAVE = "leave"
 
     @property
     def regrasps(self) -> int:
-        return int(self in (EdgeKind.REGRASP, EdgeKind.HANDOVER))
+        return int(self in (EdgeKind.REGRASP, EdgeKind.HANDOVER, EdgeKind.INHAND))
 
 
 @dataclass(frozen=True, order=True)
@@ -69,28 +74,32 @@ class Edge:
 @dataclass(frozen=True)
 class Style:
     """Which edges a manipulation may use (``--style``): ``one-arm`` picks and places with
-    one hand; ``handover`` adds hand-overs in the air; ``place-regrasp`` puts the object
-    down at intermediate placements and grasps it again; ``auto`` any of them."""
+    one hand; ``handover`` adds hand-overs in the air; ``inhand`` turns the object in the
+    hand's fingers; ``place-regrasp`` puts the object down at intermediate placements and
+    grasps it again; ``auto`` any of them."""
 
     name: str
     handover: bool
     placements: bool  # intermediate placements (regrasp edges)
+    inhand: bool = False
 
 
-STYLES = {s.name: s for s in (Style("auto", True, True), Style("one-arm", False, False),
-                               Style("handover", True, False), Style("place-regrasp", False, True))}
+STYLES = {s.name: s for s in (Style("auto", True, True, True), Style("one-arm", False, False),
+                               Style("handover", True, False), Style("inhand", False, False, True),
+                               Style("place-regrasp", False, True))}
 
 
 def style_of(path: list[Edge]) -> str:
     """The style a path uses: ``one-arm`` without regrasp, ``handover`` or
     ``place-regrasp`` when only those change the grasp, ``handover+place-regrasp`` both."""
     kinds = {e.kind for e in path}
-    used = [name for name, kind in (("handover", EdgeKind.HANDOVER), ("place-regrasp", EdgeKind.REGRASP))
-            if kind in kinds]
+    used = [name for name, kind in (("handover", EdgeKind.HANDOVER), ("inhand", EdgeKind.INHAND),
+                                    ("place-regrasp", EdgeKind.REGRASP)) if kind in kinds]
     return "+".join(used) or "one-arm"
 
 
-def ruled_out(style: Style, usable: dict[tuple[str, str], frozenset], placements: bool) -> str:
+def ruled_out(style: Style, usable: dict[tuple[str, str], frozenset], placements: bool,
+              gaits: frozenset[str] = frozenset()) -> str:
     """Why ``style`` cannot succeed, from necessary conditions alone, or "" when it may.
 
     ``usable[(hand, end)]``: the grasps of ``hand`` that may hold the object at ``end``
@@ -99,12 +108,20 @@ def ruled_out(style: Style, usable: dict[tuple[str, str], frozenset], placements
     need (Harada et al. 2014 §IV-C, Fig. 5): one arm, a node of one hand at both ends
     with the same grasp (a transfer keeps it); a hand-over, a node of one hand at the
     start and of the other at the goal; place and regrasp, a node at each end and a
-    placement between."""
+    placement between; in the hand, a hand that can finger-gait (``gaits``) with a node at
+    each end."""
     hands = list(dict.fromkeys(h for h, _ in usable))
 
     def count(h: str) -> str:
         return f"{h} hand {len(usable[h, START])} at the start, {len(usable[h, GOAL])} at the goal"
 
+    if style.inhand and not style.handover and not style.placements:
+        if not gaits:
+            return "no hand can turn the object in its fingers (finger gaiting needs three or more fingertips)"
+        if not any(usable[h, START] and usable[h, GOAL] for h in hands if h in gaits):
+            return ("no hand that can turn the object in its fingers can hold it at both the start and the goal "
+                    "(" + "; ".join(count(h) for h in hands if h in gaits) + ")")
+        return ""
     if not style.handover and not style.placements:
         if not any(usable[h, START] & usable[h, GOAL] for h in hands):
             return ("no hand can hold the object at both the start and the goal with one grasp (grasps clear of the "
@@ -124,10 +141,12 @@ def ruled_out(style: Style, usable: dict[tuple[str, str], frozenset], placements
     return ""
 
 
-def successors(nodes: Iterable[Node], style: Style, compatible: Callable[[Node, Node], bool]):
+def successors(nodes: Iterable[Node], style: Style, compatible: Callable[[Node, Node], bool],
+               turnable: Callable[[Node, Node], bool] = lambda a, b: False):
     """``out(a)`` -> the edges leaving ``a`` (None: the robot's start) among ``nodes``
     that ``style`` allows; ``compatible(a, b)`` says whether two hands' grasps can hold
-    the object together (for a hand-over)."""
+    the object together (for a hand-over), ``turnable(a, b)`` whether the hand can
+    finger-gait from ``a``'s grasp to ``b``'s (same hand)."""
     nodes = sorted(set(nodes))
     by_grasp: dict[tuple[str, int], list[Node]] = {}
     by_place: dict[str, list[Node]] = {}
@@ -145,6 +164,9 @@ def successors(nodes: Iterable[Node], style: Style, compatible: Callable[[Node, 
         if style.handover:
             edges += [Edge(EdgeKind.HANDOVER, a, b) for b in nodes if b.hand != a.hand and
                       b.placement != a.placement and (style.placements or b.placement == GOAL) and compatible(a, b)]
+        if style.inhand:
+            edges += [Edge(EdgeKind.INHAND, a, b) for b in nodes if b.hand == a.hand and b.grasp != a.grasp and
+                      b.placement != a.placement and (style.placements or b.placement == GOAL) and turnable(a, b)]
         if a.placement == GOAL:
             edges.append(Edge(EdgeKind.LEAVE, a, None))
         return edges

@@ -51,7 +51,7 @@ def plan_grasp(lists: dict[str, GraspList], gid: str, hand: str, k: int, robot) 
 def _phase(m) -> Phase:
     tr = m.transition
     return Phase(tr.label, tr.kind, dict(tr.holding), tr.touching, tr.placement, m.waypoints, m.times,
-                 blends=m.radii, timing=m.timing)
+                 object_poses=m.object_poses, contacts=m.contacts, blends=m.radii, timing=m.timing)
 
 
 def _stats(outcome: Outcome, options: OnlineOptions, hashes: dict[str, str], timings: bool) -> dict:

@@ -53,10 +53,14 @@ class QueryResult:
 
 @dataclass(frozen=True)
 class Step:
-    """A transition and its waypoint pieces: arrays (k, nq), or a query label."""
+    """A transition and its waypoint pieces: arrays (k, nq), or a query label.  A step
+    of the fingers turning the object (the in-hand kinds) has one piece, and the object's
+    poses (k, 4, 4) in W and the contacts at each of its waypoints."""
 
     transition: Transition
     pieces: tuple = ()
+    object_poses: np.ndarray | None = None
+    contacts: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -71,6 +75,8 @@ class PhaseMotion:
     times: np.ndarray
     radii: np.ndarray | None = None
     timing: Timing | None = None
+    object_poses: np.ndarray | None = None  # (k, 4, 4), an in-hand step's
+    contacts: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -221,6 +227,13 @@ def time_steps(steps: list[Step], paths: dict[str, np.ndarray], velocity: np.nda
     else None); without it every waypoint is a stop."""
     out, clock = [], 0.0
     for step in steps:
+        if step.object_poses is not None:  # the fingers turn the object: a stop at every waypoint
+            w = np.asarray(step.pieces[0], float)
+            times = time_parameterise(w, velocity, acceleration)
+            out.append(PhaseMotion(step.transition, w, times + clock, object_poses=step.object_poses,
+                                   contacts=step.contacts))
+            clock = float(times[-1]) + clock
+            continue
         pieces = [paths[p] if isinstance(p, str) else p for p in step.pieces]
         w, seg = join(pieces, [p if isinstance(p, str) else None for p in step.pieces])
         check = (lambda label, A, C, B, st=step: curve_free(st, label, A, C, B)) if curve_free else None

@@ -59,13 +59,34 @@ def test_an_intermediate_placement_turns_the_grasp():
     assert _kinds(forced) == _kinds(path)
 
 
-def test_the_search_finds_the_fewest_regrasps_on_random_graphs():
+def test_the_in_hand_regrasp_when_it_is_the_only_way():
+    """One hand reaches both ends but with no grasp usable at both, no other hand, nowhere
+    to put the object down: the hand turns it in its fingers (one regrasp); a hand that
+    cannot finger-gait has no path, nor has the one-arm style."""
+    nodes = [R0S, R1G]
+    path = search(successors(nodes, STYLES["auto"], _always, _always), lambda e: 1.0)
+    assert _kinds(path) == ["arrive", "inhand", "leave"] and (path[1].a, path[1].b) == (R0S, R1G)
+    assert style_of(path) == "inhand" and sum(e.kind.regrasps for e in path) == 1
+    assert fewest_regrasps(nodes, successors(nodes, STYLES["auto"], _always, _always), lambda e: True) == 1
+    assert search(successors(nodes, STYLES["auto"], _always), lambda e: 1.0) is None  # no finger gaiting
+    assert search(successors(nodes, STYLES["one-arm"], _always, _always), lambda e: 1.0) is None
+    forced = search(successors(nodes, STYLES["inhand"], _always, _always), lambda e: 1.0)
+    assert _kinds(forced) == ["arrive", "inhand", "leave"]
+    # where a transfer keeps the grasp, no regrasp is needed and none is made
+    path = search(successors([R0S, R0G, R1G], STYLES["auto"], _always, _always), lambda e: 1.0)
+    assert style_of(path) == "one-arm"
+
+
+@pytest.mark.parametrize("turnable", [False, True])
+def test_the_search_finds_the_fewest_regrasps_on_random_graphs(turnable):
     seen = set()
     for seed in range(60):  # half of the edges infeasible: from no path to 4 regrasps
         rng = np.random.default_rng(seed)
         places = [START, GOAL, "p1", "p2"]
         nodes = {Node(h, int(k), p) for h in ("right", "left") for k in range(3) for p in places if rng.random() < 0.5}
-        out = successors(nodes, STYLES["auto"], lambda a, b: (a.grasp + b.grasp) % 3 != 0)
+        out = successors(nodes, STYLES["auto"], lambda a, b: (a.grasp + b.grasp) % 3 != 0,
+                         (lambda a, b: a.hand == "right" and (a.grasp * b.grasp) % 2 == 0) if turnable else
+                         (lambda a, b: False))
         infeasible = {e for a in [None, *sorted(nodes)] for e in out(a) if rng.random() < 0.5}
         lengths = {}
         path = search(out, lambda e: lengths.setdefault(e, float(rng.random())), infeasible)
@@ -75,7 +96,7 @@ def test_the_search_finds_the_fewest_regrasps_on_random_graphs():
         count, witness = fewest_regrasps(nodes, out, lambda e: e not in infeasible, witness=True)
         assert count == least
         _check(witness, least, infeasible)  # the fix point's own path is one of fewest regrasps too
-    assert {None, 0, 1, 2, 3, 4} <= seen
+    assert {None, 0, 1, 2} | (set() if turnable else {3, 4}) <= seen  # turning in the hand needs fewer
 
 
 def _check(path, least, infeasible):
@@ -152,3 +173,10 @@ def test_styles_are_ruled_out_by_the_grasps_usable_at_each_end():
     u = _usable({1}, set(), {1}, set())
     assert all("at its goal pose" in ruled_out(s, u, True) for s in (over, place))
     assert "stable placement" in ruled_out(place, _usable({1}, {2}, set(), set()), False)
+    # in the hand: a hand that can finger-gait, at both ends (any grasps: it turns the object)
+    inhand = STYLES["inhand"]
+    u = _usable({1}, {2}, set(), set())
+    assert ruled_out(inhand, u, False, frozenset({"right"})) == ""
+    assert "three or more fingertips" in ruled_out(inhand, u, False)
+    assert "at both the start and the goal" in ruled_out(inhand, _usable({1}, set(), set(), {2}), False,
+                                                         frozenset({"right", "left"}))

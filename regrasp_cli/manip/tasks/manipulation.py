@@ -45,6 +45,10 @@ from regrasp_cli.grasp.build import GraspList
 from regrasp_cli.manip import steps as moves
 from regrasp_cli.manip.context import OnlineOptions, Scratch
 from regrasp_cli.manip.doublegrasp import DoubleGrasp, cheap_order, empty_list_reason, single_configurations, workable
+from regrasp_cli.dexterous.gsn import GsConfig
+from regrasp_cli.dexterous.record import piece_motions
+from regrasp_cli.dexterous.roadmap import GaitTreeOptions
+from regrasp_cli.dexterous.task import gs_scratch, turn_in_hand
 from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, ruled_out, \
     search, style_of, successors
 from regrasp_cli.manip.keyconf import OTHER, ExchangeConfig, SingleConfig, shoulder, single_configuration
@@ -81,6 +85,7 @@ class GraphOptions:
     vis_pool: int = 200  # fits nearest a hand's rest its Visibility-PRM samples from
     vis_rounds: int = 2  # Visibility-PRMs at most, each when every path through the last ones failed
     fit: FitOptions = field(default_factory=FitOptions)
+    inhand_nodes: int = 2000  # GS_n expansions an in-hand regrasp may take (seed 003's two trees)
 
 
 class _Graph:
@@ -97,10 +102,14 @@ class _Graph:
         self.shapes = {h: hand_shapes(p.robot, h, lists[h].finger_q, p.spec.planning.contact_tolerance) for h in HANDS}
         self.configs: dict[Node, SingleConfig] = {}
         self.searched: set[tuple[str, str]] = set()  # (hand, placement) searched in full
+        self.searched_turnable: set[tuple[str, str]] = set()  # ... for grasps of every finger (in-hand moves)
         self.singles: dict = {}  # (hand, start or goal) -> the hand-over task's single configurations, stats
         self.blocked: set[Edge] = set()
         self.why: dict[Edge, str] = {}
         self.exchanges: dict[Edge, ExchangeConfig] = {}
+        self.inhands: dict[Edge, list[tuple]] = {}  # an in-hand edge's finger motions (dexterous.record)
+        self.gaits = frozenset(h for h in HANDS if p.robot.hands[h].kind == "fingertips"
+                               and len(p.robot.hands[h].finger_idx) >= 3)  # hands that can finger-gait
         self.paths: dict[str, np.ndarray] = {}
         self.table: dict[str, TransitionStats] = {}
         self.counts = {"single_checks": 0, "query_checks": 0, "paths_tried": 0, "queries": 0, "exchanges_tried": 0}
@@ -144,6 +153,23 @@ class _Graph:
                         more, _ = self._search(hand, pid, rng, known, **limits)
                         found = np.union1d(found, [c.grasp for c in more])
                 self._search(hand, pid, rng, np.setdiff1d(np.arange(len(self.lists[hand])), found), **limits)
+
+    def add_turnable_nodes(self) -> None:
+        """Nodes at the start and the goal of grasps the in-hand move can start or end
+        with (every finger touching: GS_n), for the hands that can finger-gait, up to
+        ``intermediate_nodes`` each; once per run."""
+        o = self.options
+        for hand in sorted(self.gaits):
+            every = np.flatnonzero(self.lists[hand].in_contact.all(axis=1))
+            for pid in (START, GOAL):
+                if (hand, pid) in self.searched_turnable:
+                    continue
+                self.searched_turnable.add((hand, pid))
+                have = [n.grasp for n in self.configs if n.hand == hand and n.placement == pid]
+                only = np.setdiff1d(every, have)
+                if len(only) and self._reachable(hand, self.placements[pid], pid):
+                    rng = np.random.default_rng([self.seed, 31, HANDS.index(hand), (START, GOAL).index(pid)])
+                    self._search(hand, pid, rng, only, wanted=o.intermediate_nodes, attempts=o.intermediate_attempts)
 
     def _search(self, hand: str, pid: str, rng: np.random.Generator, only: np.ndarray | None = None, **limits):
         """:func:`doublegrasp.single_configurations` of the hand at placement ``pid`` (the
@@ -332,6 +358,14 @@ class _Graph:
         return not hands_collide(self.shapes[a.hand][a.grasp], la.X_OG[a.grasp], self.shapes[b.hand][b.grasp],
                                  lb.X_OG[b.grasp])
 
+    def turnable(self, a: Node, b: Node) -> bool:
+        """Can the hand turn the object in its fingers from ``a``'s grasp to ``b``'s?  A hand
+        that can finger-gait, every finger touching in both grasps (GS_n: all n fingers)."""
+        if a.hand != b.hand or a.hand not in self.gaits:
+            return False
+        touching = self.lists[a.hand].in_contact
+        return bool(touching[a.grasp].all() and touching[b.grasp].all())
+
     def length(self, e: Edge) -> float:
         """Weighted joint distance the edge's motion covers at least (its queries' ends)."""
         q = self.scratch.problem
@@ -357,6 +391,8 @@ class _Graph:
                           phase_worlds(self.scratch, self.placements[e.a.placement], None, open_))]
         if e.kind == EdgeKind.TRANSFER:
             return [Query(label, ca.lift[-1], cb.lift[-1], self._held(e.a))]
+        if e.kind == EdgeKind.INHAND:
+            return [Query(label + ":place", self.inhands[e][-1][2][-1], cb.lift[-1], self._held(e.b))]
         ex = self.exchanges[e]
         return [Query(label + ":carry", ca.lift[-1], ex.approach[0], self._held(e.a)),
                 Query(label + ":place", ex.retreat[-1], cb.lift[-1], self._held(e.b))]
@@ -384,12 +420,40 @@ class _Graph:
                 return True
         return False
 
+    def _inhand(self, e: Edge) -> bool:
+        """The finger motions of an in-hand edge (found once): the object lifted with
+        ``e.a``'s grasp, the arm held at the lift's end, the fingers turning it to exactly
+        ``e.b``'s grasp (:func:`dexterous.task.turn_in_hand`); False when they do not."""
+        if e in self.inhands:
+            return True
+        p, hand = self.scratch.problem, e.a.hand
+        grasps, names = self.lists[hand], [f.name for f in p.robot.hands[hand].spec.fingers]
+        q_a = self.configs[e.a].lift[-1]
+        q_b = q_a.copy()
+        q_b[p.robot.hands[hand].idx] = grasps.finger_q[e.b.grasp]
+        rng = np.random.default_rng([self.seed, 60, len(self.why), len(self.inhands)])
+        s = gs_scratch(p.robot, hand, p.object.mesh, p.disabled.links(), q_a, tuple(p.spec.obstacles),
+                       p.spec.object.friction, p.cache_dir, rng)
+        start, goal = (GsConfig(inverse(grasps.X_OG[k]), grasps.points[k], grasps.normals[k], q)
+                       for k, q in ((e.a.grasp, q_a), (e.b.grasp, q_b)))
+        pieces = turn_in_hand(s, start, goal, rng, GaitTreeOptions(nodes=self.options.inhand_nodes))
+        self.counts["inhand_tried"] = self.counts.get("inhand_tried", 0) + 1
+        if not pieces:
+            return False
+        self.inhands[e] = piece_motions(pieces, names, s.X_WG)
+        return True
+
     def solve(self, path: list[Edge], labels: list[str]) -> Edge | None:
         """Solve the motions of the path's edges not solved yet; the first edge that
         fails (then blocked, with why), or None when all have motions."""
         for e, label in zip(path, labels):
             if e.kind == EdgeKind.HANDOVER and not self._exchange(e):
                 self.why[e] = "no reachable collision-free exchange pose for the hand-over"
+                self.blocked.add(e)
+                return e
+            if e.kind == EdgeKind.INHAND and not self._inhand(e):
+                self.why[e] = (f"the {e.a.hand} hand's fingers did not turn the object from one grasp to the "
+                               f"other ({self.options.inhand_nodes} GS_n expansions, seed 003)")
                 self.blocked.add(e)
                 return e
         queries = [q for e, label in zip(path, labels) for q in self._queries(e, label) if q.label not in self.paths]
@@ -480,6 +544,8 @@ def steps_of(g: _Graph, path: list[Edge], labels: list[str]) -> list[Step]:
             steps += moves.regrasp(label, ca, gid(e.a), cb, gid(e.b), e.a.placement)
         elif e.kind == EdgeKind.HANDOVER:
             steps += moves.handover(label + ":carry", label + ":place", ca, gid(e.a), g.exchanges[e], cb, gid(e.b))
+        elif e.kind == EdgeKind.INHAND:
+            steps += moves.inhand(label, ca, gid(e.a), g.inhands[e], cb, gid(e.b))
         else:  # LEAVE
             steps += moves.leave(label, ca, gid(e.a), GOAL)
     return steps
@@ -491,11 +557,15 @@ def _search_and_solve(g: _Graph, style, clock: dict, stable: list[StablePlacemen
     t0 = time.perf_counter()
     if style.handover or style.placements:
         g.add_nodes([START, GOAL])  # in full (each hand and end once per run)
+    elif style.inhand:
+        g.add_nodes([START, GOAL], hands=tuple(sorted(g.gaits)))  # the hands that can turn it
     else:
         g.one_arm_nodes()
+    if style.inhand:
+        g.add_turnable_nodes()
     t0 = tick(clock, "nodes", t0)
     rounds = (o.vis_rounds if o.sampler == "vis-prm" else 1) if style.placements and stable else 0
-    out = successors(g.configs, style, g.compatible)
+    out = successors(g.configs, style, g.compatible, g.turnable)
     last = None
     for attempt in range(o.graph_attempts):
         path = search(out, g.length, g.blocked)
@@ -505,7 +575,7 @@ def _search_and_solve(g: _Graph, style, clock: dict, stable: list[StablePlacemen
             t0 = tick(clock, "search", t0)
             g.add_intermediate(stable)
             t0 = tick(clock, "nodes", t0)
-            out = successors(g.configs, style, g.compatible)
+            out = successors(g.configs, style, g.compatible, g.turnable)
             path = search(out, g.length, g.blocked)
         t0 = tick(clock, "search", t0)
         if path is None:
@@ -565,8 +635,8 @@ def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
                           _label(last))
 
 
-LEVELS = {"auto": ("one-arm", "handover", "place-regrasp"), "one-arm": ("one-arm",), "handover": ("handover",),
-          "place-regrasp": ("place-regrasp",)}
+LEVELS = {"auto": ("one-arm", "handover", "inhand", "place-regrasp"), "one-arm": ("one-arm",),
+          "handover": ("handover",), "inhand": ("inhand",), "place-regrasp": ("place-regrasp",)}
 
 
 def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions, seed: int,
@@ -600,7 +670,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
     usable = g.usable()
     tick(clock, "styles: necessary conditions", t0)
     for name in LEVELS[graph.style]:
-        cannot = ruled_out(STYLES[name], usable, bool(stable))
+        cannot = ruled_out(STYLES[name], usable, bool(stable), g.gaits)
         if cannot:
             why[name] = cannot
             failed[name] = PlanningFailed(Stage.GRASPS, cannot)
@@ -693,7 +763,7 @@ def fewer_regrasps(g: _Graph, stable: list[StablePlacement], regrasps: int, budg
         return False, 0
     if stable and not g.rounds:  # a transfer through a placement may need no regrasp
         g.add_intermediate(stable)
-    out = successors(g.configs, STYLES["auto"], g.compatible)
+    out = successors(g.configs, STYLES["auto"], g.compatible, g.turnable)
     solved = 0
     while True:
         least, path = fewest_regrasps(g.configs, out, lambda e: e not in g.blocked, limit=regrasps - 1, witness=True)
@@ -712,7 +782,7 @@ def fewer_regrasps(g: _Graph, stable: list[StablePlacement], regrasps: int, budg
 
 
 def _solved(g: _Graph, e: Edge) -> bool:
-    if e.kind == EdgeKind.HANDOVER and e not in g.exchanges:
+    if (e.kind == EdgeKind.HANDOVER and e not in g.exchanges) or (e.kind == EdgeKind.INHAND and e not in g.inhands):
         return False
     return all(q.label in g.paths for q in g._queries(e, _label(e)))
 
