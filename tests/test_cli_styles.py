@@ -134,3 +134,26 @@ def test_placing_needs_a_support_and_a_stable_placement(cache, tmp_path):
     scene = write_scene(tmp_path / "ball.yaml", d)
     result = run("--cache-dir", cache, "plan", scene, "-o", tmp_path / "p.json", "--style", "place-regrasp", *SMALL)
     assert_one_error_line(result, str(scene), "object.mesh", "no stable placement")
+
+
+def test_the_humanoid_turns_the_ball_in_its_fingers_between_cup_and_niche(tmp_path):
+    """Issue 42: no grasp serves both ends and nothing may hold the ball between them; with
+    --style inhand one hand lifts it, turns it by finger gaiting (seed 003) to a grasp the
+    niche admits, and places it: one regrasp, the in-hand phases validated with the rest.
+    (Default-size grasp lists: the small ones have no four-finger grasp at both ends.)"""
+    from regrasp_cli.validate import validate_plan
+
+    out = tmp_path / "plan.json"
+    result = run("--cache-dir", tmp_path / "cache", "plan", SCENES / "humanoid_cup_to_niche.yaml", "-o", out,
+                 "--style", "inhand", "--roadmap-nodes", "12")
+    assert result.exit_code == 0, result.output
+    plan = json.loads(out.read_text())
+    c = plan["stats"]["counts"]
+    assert c["style"] == "inhand" and c["regrasps"] == 1 and c["edges"] == ["arrive", "inhand", "leave"]
+    kinds = [p["kind"] for p in plan["phases"]]
+    turning = [p for p in plan["phases"] if p["kind"].startswith("inhand")]
+    assert "inhand-transfer" in kinds and "inhand-regrasp" in kinds
+    assert all(p["touching"] == turning[0]["touching"] and not p["holding"] for p in turning)
+    held = [p["holding"] for p in plan["phases"] if p["kind"] == "transfer"]
+    assert len(held) == 2 and held[0] != held[1] and held[0].keys() == held[1].keys()  # one hand, two grasps
+    assert validate_plan(out).valid

@@ -85,7 +85,8 @@ class GraphOptions:
     vis_pool: int = 200  # fits nearest a hand's rest its Visibility-PRM samples from
     vis_rounds: int = 2  # Visibility-PRMs at most, each when every path through the last ones failed
     fit: FitOptions = field(default_factory=FitOptions)
-    inhand_nodes: int = 2000  # GS_n expansions an in-hand regrasp may take (seed 003's two trees)
+    inhand_nodes: int = 2000  # GS_n expansions an in-hand regrasp may take (seed 003's two trees) ...
+    inhand_attempts: int = 2  # ... and in-hand edges tried per run: each failure costs seconds
 
 
 class _Graph:
@@ -426,6 +427,8 @@ class _Graph:
         ``e.b``'s grasp (:func:`dexterous.task.turn_in_hand`); False when they do not."""
         if e in self.inhands:
             return True
+        if self.counts.get("inhand_tried", 0) >= self.options.inhand_attempts:
+            return False
         p, hand = self.scratch.problem, e.a.hand
         grasps, names = self.lists[hand], [f.name for f in p.robot.hands[hand].spec.fingers]
         q_a = self.configs[e.a].lift[-1]
@@ -453,7 +456,8 @@ class _Graph:
                 return e
             if e.kind == EdgeKind.INHAND and not self._inhand(e):
                 self.why[e] = (f"the {e.a.hand} hand's fingers did not turn the object from one grasp to the "
-                               f"other ({self.options.inhand_nodes} GS_n expansions, seed 003)")
+                               f"other ({self.options.inhand_nodes} GS_n expansions, seed 003; "
+                               f"{self.options.inhand_attempts} in-hand moves tried at most)")
                 self.blocked.add(e)
                 return e
         queries = [q for e, label in zip(path, labels) for q in self._queries(e, label) if q.label not in self.paths]
@@ -616,6 +620,14 @@ def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
             return PlanningFailed(Stage.GRASPS, f"no hand reaches a collision-free grasp of the object at its {pid} "
                                                 "pose")
     tried = g.counts["paths_tried"]
+    if style.inhand and not (style.handover or style.placements) and last is None and not tried:
+        every = {(n.hand, n.placement) for n in g.configs if n.hand in g.gaits
+                 and g.lists[n.hand].in_contact[n.grasp].all()}
+        ends = ", ".join(f"{h} hand: " + (" and ".join(p for p in (START, GOAL) if (h, p) in every) or "neither end")
+                         for h in sorted(g.gaits))
+        return PlanningFailed(Stage.GRASPS, f"no in-hand path: finger gaiting starts and ends with every finger on the "
+                                            f"object, and no hand that can gait has such a grasp at both the start "
+                                            f"and the goal ({ends})")
     if not (style.handover or style.placements) and last is None and not tried:
         have = {(n.hand, n.placement) for n in g.configs}
         ends = ", ".join(f"{h} hand: " + (" and ".join(p for p in (START, GOAL) if (h, p) in have) or "neither end")
