@@ -84,7 +84,8 @@ class Style:
     inhand: bool = False
 
 
-STYLES = {s.name: s for s in (Style("auto", True, True, True), Style("one-arm", False, False),
+# auto does not turn the object in the hand yet (manip.tasks.manipulation.LEVELS says why)
+STYLES = {s.name: s for s in (Style("auto", True, True), Style("one-arm", False, False),
                                Style("handover", True, False), Style("inhand", False, False, True),
                                Style("place-regrasp", False, True))}
 

@@ -8,12 +8,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, ruled_out, \
-    search, style_of, successors, type2
+from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, Style, fewest_regrasps, optimise, \
+    ruled_out, search, style_of, successors, type2
 
 R0S, R0G = Node("right", 0, START), Node("right", 0, GOAL)
 L1G = Node("left", 1, GOAL)
 R0P, R1P, R1G = Node("right", 0, "p1"), Node("right", 1, "p1"), Node("right", 1, GOAL)
+ANY = Style("any", True, True, True)  # every move, turning the object in the hand too
 
 
 def _always(a, b) -> bool:
@@ -64,16 +65,17 @@ def test_the_in_hand_regrasp_when_it_is_the_only_way():
     to put the object down: the hand turns it in its fingers (one regrasp); a hand that
     cannot finger-gait has no path, nor has the one-arm style."""
     nodes = [R0S, R1G]
-    path = search(successors(nodes, STYLES["auto"], _always, _always), lambda e: 1.0)
+    path = search(successors(nodes, ANY, _always, _always), lambda e: 1.0)
     assert _kinds(path) == ["arrive", "inhand", "leave"] and (path[1].a, path[1].b) == (R0S, R1G)
     assert style_of(path) == "inhand" and sum(e.kind.regrasps for e in path) == 1
-    assert fewest_regrasps(nodes, successors(nodes, STYLES["auto"], _always, _always), lambda e: True) == 1
-    assert search(successors(nodes, STYLES["auto"], _always), lambda e: 1.0) is None  # no finger gaiting
+    assert fewest_regrasps(nodes, successors(nodes, ANY, _always, _always), lambda e: True) == 1
+    assert search(successors(nodes, ANY, _always), lambda e: 1.0) is None  # no finger gaiting
+    assert search(successors(nodes, STYLES["auto"], _always, _always), lambda e: 1.0) is None  # not in auto yet
     assert search(successors(nodes, STYLES["one-arm"], _always, _always), lambda e: 1.0) is None
     forced = search(successors(nodes, STYLES["inhand"], _always, _always), lambda e: 1.0)
     assert _kinds(forced) == ["arrive", "inhand", "leave"]
     # where a transfer keeps the grasp, no regrasp is needed and none is made
-    path = search(successors([R0S, R0G, R1G], STYLES["auto"], _always, _always), lambda e: 1.0)
+    path = search(successors([R0S, R0G, R1G], ANY, _always, _always), lambda e: 1.0)
     assert style_of(path) == "one-arm"
 
 
@@ -84,7 +86,7 @@ def test_the_search_finds_the_fewest_regrasps_on_random_graphs(turnable):
         rng = np.random.default_rng(seed)
         places = [START, GOAL, "p1", "p2"]
         nodes = {Node(h, int(k), p) for h in ("right", "left") for k in range(3) for p in places if rng.random() < 0.5}
-        out = successors(nodes, STYLES["auto"], lambda a, b: (a.grasp + b.grasp) % 3 != 0,
+        out = successors(nodes, ANY, lambda a, b: (a.grasp + b.grasp) % 3 != 0,
                          (lambda a, b: a.hand == "right" and (a.grasp * b.grasp) % 2 == 0) if turnable else
                          (lambda a, b: False))
         infeasible = {e for a in [None, *sorted(nodes)] for e in out(a) if rng.random() < 0.5}
