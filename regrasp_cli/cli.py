@@ -263,8 +263,8 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
 @click.option("--style", type=click.Choice(["auto", "one-arm", "handover", "inhand", "place-regrasp", "seed000"]),
               default="auto", show_default=True,
               help="auto: the manipulation with the fewest regrasps (one arm, hand-overs, intermediate placements); "
-                   "or only one arm, only hand-overs, only intermediate placements; seed000: the fixed hand-over "
-                   "task of Saut et al. 2010.")
+                   "or only one arm, only hand-overs, only turning the object in one hand's fingers (inhand, not in "
+                   "auto yet), only intermediate placements; seed000: the fixed hand-over task of Saut et al. 2010.")
 @click.option("--sampler", type=click.Choice(["faces", "vis-prm"]), default="faces", show_default=True,
               help="Where intermediate placements come from: one fit per resting face of the object, or a "
                    "Visibility-PRM over the hands' grasps at placements on the supports (Harada et al. 2014 §IV-B-2).")

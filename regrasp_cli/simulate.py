@@ -27,9 +27,10 @@ configuration (bounded whatever the object does).  The fingers are never written
 
 The measure: per sample, the object's pose against the plan's (:attr:`Samples.X_WO`),
 the distance of the origins (m) and the rotation angle between them (rad); per phase the
-largest and the last, and whether the object was dropped (a phase that holds it ends with
-no robot geometry touching it).  A phase passes when its largest drift is within the
-tolerances.
+largest and the last, and whether the object was dropped (a phase that holds it rigidly
+ends with no robot geometry touching it; in-hand phases hold it with their fingers'
+contacts and are judged by their drift alone).  A phase passes when its largest drift is
+within the tolerances; a simulation that diverged (MuJoCo's warnings) passes nothing.
 
 Units: s, m, rad, kg, N.
 """
@@ -100,10 +101,11 @@ class SimReport:
     tracking_error: float  # rad or m, the largest joint error at the plan's end
     wall_s: float
     phases: tuple[PhaseDrift, ...] = field(default_factory=tuple)
+    diverged: bool = False  # MuJoCo's state went bad and was reset: the drifts say nothing of the plan
 
     @property
     def ok(self) -> bool:
-        return all(p.ok for p in self.phases)
+        return not self.diverged and all(p.ok for p in self.phases)
 
     @property
     def first_failure(self) -> PhaseDrift | None:
@@ -135,7 +137,7 @@ def convex_parts(coacd, vertices: np.ndarray, faces: np.ndarray, threshold: floa
     part's vertices (k, 3).  Seconds for a scanned object, so kept under
     ``cache_dir/objects/`` by the mesh's bytes and coacd's parameters."""
     v, f = np.ascontiguousarray(vertices, float), np.ascontiguousarray(faces, np.int64)
-    params = {"threshold": threshold, "max_convex_hull": 64, "seed": 0, "coacd": getattr(coacd, "__version__", "")}
+    params = {"threshold": threshold, "max_convex_hull": 64, "seed": 0, "coacd": _version("coacd")}
     expected = Provenance(PARTS_FORMAT, PARTS_VERSION, {"mesh": sha256_bytes(v.tobytes() + f.tobytes()),
                                                         "params": sha256_params(params)})
     path = None if cache_dir is None else (Path(cache_dir) / "objects" /
@@ -150,6 +152,15 @@ def convex_parts(coacd, vertices: np.ndarray, faces: np.ndarray, threshold: floa
         write_artefact(path, expected, {"vertices": np.concatenate(parts),
                                         "counts": np.array([len(p) for p in parts], dtype=np.int64)})
         return parts
+
+
+def _version(dist: str) -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(dist)
+    except PackageNotFoundError:
+        return ""
 
 
 def _decompose(coacd, v: np.ndarray, f: np.ndarray, params: dict) -> list[np.ndarray]:
@@ -374,13 +385,24 @@ def _pushes(plan: Plan, inputs: Inputs, samples: Samples,
     """Per sample, the contacts that squeeze: (hand, finger, force on the object in O (3,)
     N, weight in [0, 1], the contact point in O (3,) m), the forces :func:`internal_forces` of the contacts held.  A
     holding hand's grasp at full weight; a hand closing on the object (touching now,
-    holding next) ramped up over the phase, one opening off it ramped down; in-hand, the
-    fingers on their contacts at both ends of a segment at full weight (the stance), a
-    finger leaving or arriving pushes along its normal, ramped."""
+    holding next) ramped up over the phase, one opening off it ramped down; in-hand, along
+    a segment the blend (1 - s) F_a + s F_b of the internal forces of the contacts at its
+    two ends (a finger leaving or arriving fades out or in, and the sum stays balanced)."""
     robot = inputs.robot
     mu = inputs.friction
     out: list[list[tuple[str, str, np.ndarray, float, np.ndarray]]] = [[] for _ in samples.t]
     squeezes: dict[str, list[tuple[str, str, np.ndarray, np.ndarray]]] = {}
+    stances: dict[tuple, dict] = {}  # an in-hand contact set's internal forces
+
+    def squeeze_of(contacts, hand_of: dict) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """finger -> (its force (3,), its point (3,)): the internal forces of these contacts."""
+        mine = [c for c in contacts if c["finger"] in hand_of]
+        key = tuple((c["finger"], np.asarray(c["point"], float).tobytes()) for c in mine)
+        if key not in stances:
+            P = np.array([c["point"] for c in mine], float).reshape(-1, 3)
+            F = internal_forces(P, np.array([c["normal"] for c in mine], float).reshape(-1, 3), mu, force)
+            stances[key] = {c["finger"]: (F_i, p_i) for c, F_i, p_i in zip(mine, F, P)}
+        return stances[key]
 
     def grasp_pushes(hand: str, gid: str, w: float) -> list[tuple[str, str, np.ndarray, float, np.ndarray]]:
         if gid not in squeezes:
@@ -402,24 +424,13 @@ def _pushes(plan: Plan, inputs: Inputs, samples: Samples,
         if p.contacts is not None:
             hand_of = {f.name: h for h in p.touching for f in robot.hands[h].spec.fingers}
             seg = np.clip(np.searchsorted(p.times, t, side="right") - 1, 0, len(p.times) - 2)
-            stance = {}
-            for j in range(len(p.times) - 1):
-                a = {c["finger"]: c for c in p.contacts[j] if c["finger"] in hand_of}
-                b = {c["finger"]: c for c in p.contacts[j + 1] if c["finger"] in hand_of}
-                both = sorted(a.keys() & b.keys())
-                F = internal_forces([a[f]["point"] for f in both], [a[f]["normal"] for f in both], mu, force)
-                stance[j] = (a, b, dict(zip(both, F)))
             for i, j, tt in zip(at, seg, t):
-                a, b, F = stance[j]
                 s = float(_ramp(np.array(tt), p.times[j], p.times[j + 1]))
-                for f in sorted(a.keys() | b.keys()):
-                    c = a.get(f) or b[f]
-                    if f in F:
-                        out[i].append((hand_of[f], f, F[f], 1.0, np.asarray(c["point"], float)))
-                    else:
-                        n = np.asarray(c["normal"], float)
-                        out[i].append((hand_of[f], f, -force * n / max(np.linalg.norm(n), 1e-12),
-                                       1.0 - s if f in a else s, np.asarray(c["point"], float)))
+                ends = [squeeze_of(p.contacts[j], hand_of), squeeze_of(p.contacts[j + 1], hand_of)]
+                for f in sorted(ends[0].keys() | ends[1].keys()):  # (1 - s) F_j + s F_j+1: each balanced
+                    F = sum(w * e[f][0] for w, e in ((1.0 - s, ends[0]), (s, ends[1])) if f in e)
+                    point = (ends[0].get(f) or ends[1][f])[1]
+                    out[i].append((hand_of[f], f, F, 1.0, point))
             continue
         for hand in p.touching:
             if hand in p.holding:
@@ -433,6 +444,15 @@ def _pushes(plan: Plan, inputs: Inputs, samples: Samples,
             for i, wi in zip(at, w):
                 out[i] += grasp_pushes(hand, gid, float(wi))
     return out
+
+
+def point_jacobian(model, data, frame: int, p_W: np.ndarray) -> np.ndarray:
+    """(3, nv) Jacobian of the point at ``p_W`` (3,) m of frame ``frame``'s link (its
+    velocity in W: v + w x r, r from the frame's origin), from ``data`` after
+    ``computeJointJacobians`` and ``updateFramePlacements``."""
+    J = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
+    r = np.asarray(p_W, float) - data.oMf[frame].translation
+    return J[:3] - pin.skew(r) @ J[3:]
 
 
 def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float) -> np.ndarray:
@@ -457,9 +477,7 @@ def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float) 
         for hand, finger, F_O, w, p_O in push:
             h = robot.hands[hand]
             f = [x.name for x in h.spec.fingers].index(finger)
-            J = pin.getFrameJacobian(model, data, h.tip_frames[f], pin.LOCAL_WORLD_ALIGNED)
-            r = X_WO[:3, :3] @ p_O + X_WO[:3, 3] - data.oMf[h.tip_frames[f]].translation
-            J_c = J[:3] - pin.skew(r) @ J[3:]  # v + w x r of the point at r from the frame
+            J_c = point_jacobian(model, data, h.tip_frames[f], X_WO[:3, :3] @ p_O + X_WO[:3, 3])
             idx = h.finger_idx[f]
             tau[i, idx] += J_c[:, v_of[idx]].T @ (w * X_WO[:3, :3] @ F_O)
     return tau
@@ -473,7 +491,10 @@ def run(plan: Plan, file: Path, inputs: Inputs, opts: SimOptions = SimOptions(),
 
     mujoco, _ = import_mujoco()
     wall = time.perf_counter()
-    samples = sample_plan(plan, file, inputs, 1.0 / opts.timestep)
+    try:
+        samples = sample_plan(plan, file, inputs, 1.0 / opts.timestep)
+    except ValueError as exc:  # more samples than memory holds
+        raise InputError(file, "phases", f"too long to simulate at {1 / opts.timestep:g} Hz: {exc}") from None
     world = build_world(inputs, samples.X_WO[0], opts, cache_dir)
     m = world.model
     d = mujoco.MjData(m)
@@ -514,13 +535,15 @@ def run(plan: Plan, file: Path, inputs: Inputs, opts: SimOptions = SimOptions(),
     phases = []
     for k, p in enumerate(plan.phases):
         at = np.flatnonzero(samples.phase == k)
-        if not len(at):
-            continue
+        if not len(at):  # shorter than a step: judged at the sample where it ends
+            at = np.array([min(int(np.searchsorted(samples.t, p.times[-1])), len(samples.t) - 1)])
         dropped = bool(p.holding) and not touching[at[-1]]
         mp, ma = float(pos[at].max()), float(ang[at].max())
         phases.append(PhaseDrift(p.name, p.kind.value, float(p.times[0]), float(p.times[-1]), mp, ma,
                                  float(pos[at[-1]]), float(ang[at[-1]]), dropped,
                                  not dropped and mp <= opts.position_tol and ma <= opts.angle_tol))
     track = float(np.abs(d.qpos[world.qpos] - samples.q[-1]).max())
+    W = mujoco.mjtWarning
+    diverged = any(d.warning[w].number for w in (W.mjWARN_BADQACC, W.mjWARN_BADQPOS, W.mjWARN_BADQVEL))
     return SimReport(str(file), opts, float(m.body_mass[obj]), world.object_parts, track,
-                     time.perf_counter() - wall, tuple(phases))
+                     time.perf_counter() - wall, tuple(phases), diverged)

@@ -385,11 +385,6 @@ def validate_plan(path: str | Path, resolution: float = 0.01, cartesian_step: fl
         return ValidationReport((Issue(None, None, "status", msg),), 0, {})
 
     inputs = load_inputs(plan, path)
-    missing = [pid for pid in ("start", "goal") if plan.placement(pid) is None]
-    if missing:
-        return ValidationReport(tuple(Issue(None, None, "attachment", f"the plan records the object's {pid} pose in "
-                                                                      f"placements[] (id {shown(pid)})")
-                                      for pid in missing), 0, {})
     robot, reach, kin = inputs.robot, joint_reach(inputs.robot), Kinematics(inputs.robot)
     issues = [Issue(None, None, "input", note) for note in inputs.notes]
     carries, poses = follow(path, plan, kin)

@@ -12,7 +12,7 @@ import pytest
 
 from cli_helpers import SMALL, assert_one_error_line, run
 
-from regrasp_cli.simulate import internal_forces
+from regrasp_cli.simulate import internal_forces, point_jacobian
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "configs" / "scenes" / "hironx_onearm.yaml"
@@ -64,6 +64,35 @@ def test_contacts_that_cannot_squeeze_push_along_their_normals():
     N = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])  # side by side on one face
     assert np.allclose(internal_forces(P, N, 0.5, 5.0), -5.0 * N)
     assert np.allclose(internal_forces(P[:1], N[:1], 0.5, 5.0), -5.0 * N[:1])
+
+
+def test_the_squeeze_acts_at_the_contact_not_at_the_fingertip_frame(robot):
+    """The point 2 cm off the humanoid's index fingertip frame (a revolute finger) moves
+    as its Jacobian says: finite differences of its position agree to 1e-6 (a frame's
+    Jacobian would be off by w x r, the torque for a pad's contact wrong with it)."""
+    import pinocchio as pin
+
+    model, data = robot.model, robot.model.createData()
+    h = robot.hands["right"]
+    frame = h.tip_frames[1]
+    rng = np.random.default_rng(0)
+    q = robot.q_rest.copy()
+    q[h.idx] = h.open + rng.uniform(0.1, 0.4, len(h.idx))
+    qd = np.zeros(robot.nq)
+    qd[h.finger_idx[1]] = rng.normal(size=len(h.finger_idx[1]))
+
+    def point(x: np.ndarray) -> np.ndarray:
+        pin.framesForwardKinematics(model, data, robot.to_pin(x))
+        X = data.oMf[frame]
+        return X.translation + X.rotation @ np.array([0.0, 0.02, 0.0])
+
+    p_W = point(q)
+    pin.computeJointJacobians(model, data, robot.to_pin(q))
+    pin.updateFramePlacements(model, data)
+    J = point_jacobian(model, data, frame, p_W)
+    eps = 1e-6
+    fd = (point(q + eps * qd) - point(q - eps * qd)) / (2 * eps)
+    assert np.linalg.norm(J @ qd - fd) < 1e-6 and np.linalg.norm(fd) > 1e-3
 
 
 @pytest.fixture(scope="module")

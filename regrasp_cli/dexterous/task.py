@@ -108,11 +108,14 @@ def scratch(problem: InhandProblem, cache_dir: Path | None, rng: np.random.Gener
 
 
 def gs_scratch(robot: Robot, hand: str, mesh, disabled_links, q_fixed: np.ndarray, obstacles: tuple[ObstacleSpec, ...],
-               friction: float, cache_dir: Path | None, rng: np.random.Generator) -> GsScratch:
+               friction: float, cache_dir: Path | None, rng: np.random.Generator,
+               tolerance: float = CONTACT_TOLERANCE) -> GsScratch:
     """What the planner checks GS_n with: the hand model with the object (the robot at
     ``q_fixed`` (nq,), the wrist held there), the fingers' workspaces, the surface sampled
-    every half fingertip radius, the triangulated one; ``obstacles`` posed in W."""
-    hm = HandModel(robot, hand, mesh, disabled_links, CONTACT_TOLERANCE)
+    every half fingertip radius, the triangulated one; ``obstacles`` posed in W;
+    ``tolerance`` (m) the fingertip-object penetration a contact may have (the one the
+    plan records, which the validator checks with)."""
+    hm = HandModel(robot, hand, mesh, disabled_links, tolerance)
     hm.q = np.array(q_fixed, float)
     hm.X_WG = Kinematics(robot).fk(hm.q, robot.hands[hand].grasp_frame)
     ws = hand_workspace(robot, hand, cache_dir=cache_dir)
@@ -122,7 +125,7 @@ def gs_scratch(robot: Robot, hand: str, mesh, disabled_links, q_fixed: np.ndarra
     world = None
     if obstacles:  # checked as the validator does, with the object touched by this hand only
         world = collision_world(robot, obstacles, disabled_links, ObjectPlacement(mesh, hm.X_WG, None, (hand,)),
-                                CollisionOptions(CONTACT_TOLERANCE, CONTACT_TOLERANCE))
+                                CollisionOptions(tolerance, tolerance))
     return GsScratch(hm, ws, sampled, MeshSurface.of(mesh), rho, GsOptions(friction=friction), world=world)
 
 

@@ -76,7 +76,8 @@ class Style:
     """Which edges a manipulation may use (``--style``): ``one-arm`` picks and places with
     one hand; ``handover`` adds hand-overs in the air; ``inhand`` turns the object in the
     hand's fingers; ``place-regrasp`` puts the object down at intermediate placements and
-    grasps it again; ``auto`` any of them."""
+    grasps it again; ``auto`` all of them but ``inhand`` (not yet: see
+    :data:`manip.tasks.manipulation.LEVELS`)."""
 
     name: str
     handover: bool
@@ -91,8 +92,9 @@ STYLES = {s.name: s for s in (Style("auto", True, True), Style("one-arm", False,
 
 
 def style_of(path: list[Edge]) -> str:
-    """The style a path uses: ``one-arm`` without regrasp, ``handover`` or
-    ``place-regrasp`` when only those change the grasp, ``handover+place-regrasp`` both."""
+    """The style a path uses: ``one-arm`` without regrasp, ``handover``, ``inhand`` or
+    ``place-regrasp`` when only that move changes the grasp, joined by ``+`` when several
+    do (``handover+place-regrasp``)."""
     kinds = {e.kind for e in path}
     used = [name for name, kind in (("handover", EdgeKind.HANDOVER), ("inhand", EdgeKind.INHAND),
                                     ("place-regrasp", EdgeKind.REGRASP)) if kind in kinds]

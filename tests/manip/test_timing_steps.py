@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from regrasp_cli.manip.modes import Kind, Transition
+from regrasp_cli.manip.modes import Kind, Mode, Transition
 from regrasp_cli.manip.solve import Step, join, time_steps
 from regrasp_cli.motion.blend import trajectory, blended_path
 from regrasp_cli.motion.timing import time_parameterise
@@ -57,3 +57,23 @@ def test_without_any_free_blend_every_waypoint_is_a_stop():
     np.testing.assert_allclose(phases[0].times, time_parameterise(w, V, A))
     blended = time_steps(_steps(), {"q": PATH}, V, A, lambda *_: True)
     assert blended[0].times[-1] < phases[0].times[-1]
+
+
+def test_an_in_hand_step_keeps_its_poses_and_contacts_on_its_waypoints():
+    """The fingers' step is timed stop to stop even where blends are free, with every
+    waypoint kept (a repeated one too: it has its own contacts), its object poses and
+    contacts beside them, and it starts where the step before it ends."""
+    fingers = Mode(inhand="right")
+    held = Mode.held(right="right-1")
+    w = np.array([[0.0, 0.0], [0.2, 0.0], [0.2, 0.0], [0.2, 0.3]])
+    X = np.repeat(np.eye(4)[None], 4, axis=0)
+    X[:, 0, 3] = [0.0, 0.01, 0.01, 0.02]
+    contacts = tuple(({"finger": "f", "point": np.zeros(3), "normal": np.array([0.0, 0.0, 1.0])},) for _ in range(4))
+    steps = [Step(Transition(Kind.TRANSFER, held, held, "lift"), (np.array([[0.0, -0.2], [0.0, 0.0]]),)),
+             Step(Transition(Kind.INHAND_TRANSFER, fingers, fingers, "turn", ("right",)), (w,), X, contacts)]
+    out = time_steps(steps, {}, np.ones(2), np.ones(2), curve_free=lambda *a: True)
+    turn = out[1]
+    assert np.array_equal(turn.waypoints, w) and turn.radii is None and turn.timing is None
+    assert turn.object_poses is X and turn.contacts is contacts
+    assert turn.times[0] == out[0].times[-1] and np.all(np.diff(turn.times) >= 0)
+    assert np.allclose(np.diff(turn.times), np.diff(time_parameterise(w, np.ones(2), np.ones(2))))

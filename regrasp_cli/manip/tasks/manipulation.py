@@ -113,7 +113,8 @@ class _Graph:
                                and len(p.robot.hands[h].finger_idx) >= 3)  # hands that can finger-gait
         self.paths: dict[str, np.ndarray] = {}
         self.table: dict[str, TransitionStats] = {}
-        self.counts = {"single_checks": 0, "query_checks": 0, "paths_tried": 0, "queries": 0, "exchanges_tried": 0}
+        self.counts = {"single_checks": 0, "query_checks": 0, "paths_tried": 0, "queries": 0, "exchanges_tried": 0,
+                       "inhand_tried": 0}
         reach = joint_reach(p.robot)
         self.reach = {h: options.reach_factor * reach[p.robot.hands[h].arm_idx[0]] for h in HANDS}
         self.shoulder = {h: shoulder(scratch, h, p.robot.q_rest) for h in HANDS}
@@ -427,7 +428,7 @@ class _Graph:
         ``e.b``'s grasp (:func:`dexterous.task.turn_in_hand`); False when they do not."""
         if e in self.inhands:
             return True
-        if self.counts.get("inhand_tried", 0) >= self.options.inhand_attempts:
+        if self.counts["inhand_tried"] >= self.options.inhand_attempts:
             return False
         p, hand = self.scratch.problem, e.a.hand
         grasps, names = self.lists[hand], [f.name for f in p.robot.hands[hand].spec.fingers]
@@ -436,11 +437,11 @@ class _Graph:
         q_b[p.robot.hands[hand].idx] = grasps.finger_q[e.b.grasp]
         rng = np.random.default_rng([self.seed, 60, len(self.why), len(self.inhands)])
         s = gs_scratch(p.robot, hand, p.object.mesh, p.disabled.links(), q_a, tuple(p.spec.obstacles),
-                       p.spec.object.friction, p.cache_dir, rng)
+                       p.spec.object.friction, p.cache_dir, rng, p.collision_options.contact_tolerance)
         start, goal = (GsConfig(inverse(grasps.X_OG[k]), grasps.points[k], grasps.normals[k], q)
                        for k, q in ((e.a.grasp, q_a), (e.b.grasp, q_b)))
         pieces = turn_in_hand(s, start, goal, rng, GaitTreeOptions(nodes=self.options.inhand_nodes))
-        self.counts["inhand_tried"] = self.counts.get("inhand_tried", 0) + 1
+        self.counts["inhand_tried"] += 1
         if not pieces:
             return False
         self.inhands[e] = piece_motions(pieces, names, s.X_WG)
@@ -454,12 +455,15 @@ class _Graph:
                 self.why[e] = "no reachable collision-free exchange pose for the hand-over"
                 self.blocked.add(e)
                 return e
-            if e.kind == EdgeKind.INHAND and not self._inhand(e):
-                self.why[e] = (f"the {e.a.hand} hand's fingers did not turn the object from one grasp to the "
-                               f"other ({self.options.inhand_nodes} GS_n expansions, seed 003; "
-                               f"{self.options.inhand_attempts} in-hand moves tried at most)")
-                self.blocked.add(e)
-                return e
+            if e.kind == EdgeKind.INHAND:
+                spent = self.counts["inhand_tried"] >= self.options.inhand_attempts
+                if not self._inhand(e):
+                    self.why[e] = (f"not tried: {self.options.inhand_attempts} in-hand moves a run at most, and "
+                                   "they failed" if spent else
+                                   f"the {e.a.hand} hand's fingers did not turn the object from one grasp to the "
+                                   f"other ({self.options.inhand_nodes} GS_n expansions, seed 003)")
+                    self.blocked.add(e)
+                    return e
         queries = [q for e, label in zip(path, labels) for q in self._queries(e, label) if q.label not in self.paths]
         streams = [[self.seed, 50, self.counts["queries"] + i] for i in range(len(queries))]
         self.counts["queries"] += len(queries)
