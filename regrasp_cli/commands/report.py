@@ -12,6 +12,7 @@ from rich.table import Table
 from regrasp_cli.model.reach import Reach, reach
 from regrasp_cli.artefacts import check_positive, build_grasp_list, build_options, roadmap_options
 from regrasp_cli.commands.progress import load_problem_shown
+from regrasp_cli.placement.supports import resting_gap
 from regrasp_cli.scene import Problem
 
 
@@ -121,6 +122,12 @@ def print_info(scene: Path, cache_dir: Path, seed: int | None, console: Console 
         else:
             verdict = "reachable by neither arm"
         console.print(f"The object's {pose} pose is {verdict}.")
+    for pose, X in (("start", spec.task.X_WO_start), ("goal", spec.task.X_WO_goal)):
+        gap = resting_gap(problem.object.mesh.vertices, X, spec.obstacles)
+        if gap is not None and abs(gap) > max(problem.collision_options.support_tolerance, 0.001):
+            where = f"{gap * 1000:.1f} mm above" if gap > 0 else f"{-gap * 1000:.1f} mm into"
+            console.print(f"[yellow]warning[/]: the object's {pose} pose is {where} the obstacle top under it; it "
+                          "would fall or be pushed out on a real robot (the planner has no gravity)")
 
 
 def provenance_table(file: Path, prov) -> Table:

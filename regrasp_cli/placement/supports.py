@@ -113,6 +113,24 @@ def scene_supports(obstacles: tuple[ObstacleSpec, ...], names: tuple[str, ...] |
     return out
 
 
+def resting_gap(vertices: np.ndarray, X_WO: np.ndarray, obstacles: tuple[ObstacleSpec, ...],
+                tol: float = 0.001) -> float | None:
+    """How far (m) the object (``vertices`` (n, 3) in O, at ``X_WO`` (4, 4)) hangs above the
+    highest obstacle top under its lowest point (negative: into it), or None when no flat
+    top is under it.  The planner has no gravity: an object placed 5 cm above its table
+    is planned as if it stood there (PR2's scene did, until `regrasp simulate` dropped it).
+    The lowest point is the mean of the vertices within ``tol`` of the lowest."""
+    v = np.asarray(vertices, float) @ X_WO[:3, :3].T + X_WO[:3, 3]
+    low = v[v[:, 2] <= v[:, 2].min() + tol]
+    foot = np.r_[low[:, :2].mean(axis=0), v[:, 2].min()]
+    best = None
+    for top in filter(None, map(top_of, obstacles)):
+        p_T = np.linalg.inv(top.X_WT) @ np.r_[foot, 1.0]
+        if _inside(top.outline, p_T[None, None, :2], 0.0)[0] and p_T[2] > -0.05:  # a top under it, or just above
+            best = p_T[2] if best is None else min(best, float(p_T[2]), key=abs)
+    return None if best is None else float(best)
+
+
 def _inside(outline: np.ndarray, points: np.ndarray, margin: float) -> np.ndarray:
     """Is every point of each set at least ``margin`` inside the convex ``outline`` (k, 2)?
     ``points`` (..., m, 2) -> (...,) bool."""

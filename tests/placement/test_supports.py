@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 from regrasp_cli.config import ObstacleSpec
 from regrasp_cli.errors import InputError
 from regrasp_cli.placement.stable import stable_placements
-from regrasp_cli.placement.supports import FitOptions, fit_placements, scene_supports, top_of
+from regrasp_cli.placement.supports import FitOptions, fit_placements, resting_gap, scene_supports, top_of
 
 
 def _pose(xyz, rpy=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -82,3 +82,17 @@ def test_an_obstacle_on_the_top_takes_its_place_away():
     kept = {tuple(np.round(X[:3, 3], 9)) for X in both.X_WO}
     assert not any(tuple(np.round(X[:3, 3], 9)) in kept for X in free.X_WO[near])
     assert all(tuple(np.round(X[:3, 3], 9)) in kept for X in free.X_WO[~near])
+
+
+def test_the_gap_under_a_resting_object_is_measured_to_the_top_beneath_it():
+    """A 4 x 4 x 12 cm block (origin at its base) over a table whose top is at z = 0.72:
+    standing on it, 5 cm above it (PR2's scene before 0e5d0f1), 5 mm into it; beside the
+    table nothing is under it.  Its lowest point decides (the block upside down too)."""
+    block = trimesh.creation.box(extents=(0.04, 0.04, 0.12))
+    block.apply_translation([0.0, 0.0, 0.06])
+    table = (_box("table", (0.6, 1.8, 0.04), (0.75, 0.0, 0.70)),)
+    assert resting_gap(block.vertices, _pose((0.55, -0.7, 0.72)), table) == pytest.approx(0.0, abs=1e-9)
+    assert resting_gap(block.vertices, _pose((0.55, -0.7, 0.77)), table) == pytest.approx(0.05)
+    assert resting_gap(block.vertices, _pose((0.55, -0.7, 0.715)), table) == pytest.approx(-0.005)
+    assert resting_gap(block.vertices, _pose((0.55, -0.7, 0.84), (np.pi, 0, 0)), table) == pytest.approx(0.0, abs=1e-9)
+    assert resting_gap(block.vertices, _pose((0.20, -0.7, 0.72)), table) is None
