@@ -466,6 +466,7 @@ def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float) 
     data = model.createData()
     v_of = np.array([model.joints[j].idx_v for j in range(1, model.njoints)], dtype=int)
     pushes = _pushes(plan, inputs, samples, force)
+    finger_of = {(hand, x.name): f for hand, h in robot.hands.items() for f, x in enumerate(h.spec.fingers)}
     tau = np.zeros((len(samples.t), len(robot.joint_names)))
     for i, push in enumerate(pushes):
         if not push:
@@ -475,8 +476,7 @@ def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float) 
         pin.updateFramePlacements(model, data)
         X_WO = samples.X_WO[i]
         for hand, finger, F_O, w, p_O in push:
-            h = robot.hands[hand]
-            f = [x.name for x in h.spec.fingers].index(finger)
+            h, f = robot.hands[hand], finger_of[hand, finger]
             J_c = point_jacobian(model, data, h.tip_frames[f], X_WO[:3, :3] @ p_O + X_WO[:3, 3])
             idx = h.finger_idx[f]
             tau[i, idx] += J_c[:, v_of[idx]].T @ (w * X_WO[:3, :3] @ F_O)

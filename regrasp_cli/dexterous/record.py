@@ -13,6 +13,7 @@ joined by straight joint-space segments, each timed rest to rest within the join
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -37,16 +38,27 @@ def _times(q: np.ndarray, t0: float, velocity: np.ndarray, acceleration: np.ndar
     return t0 + np.r_[0.0, np.cumsum(d)]
 
 
-def piece_motions(pieces, names: list[str], X_WG: np.ndarray) -> list[tuple]:
+class FingerMotion(NamedTuple):
+    """One piece of finger gaiting as a phase: its kind and label, waypoints (k, nq), the
+    object's poses (k, 4, 4) in W and the contacts at each waypoint."""
+
+    kind: Kind
+    label: str
+    q: np.ndarray
+    X_WO: np.ndarray
+    contacts: tuple
+
+
+def piece_motions(pieces, names: list[str], X_WG: np.ndarray) -> list[FingerMotion]:
     """Per piece (:class:`~dexterous.gait.Transfer` or :class:`~dexterous.gait.Regrasp`),
-    its kind, label, waypoints (k, nq), the object's poses (k, 4, 4) in W (the hand's grasp
-    frame at ``X_WG``) and the contacts at each waypoint (the fingers ``names``)."""
+    its :class:`FingerMotion`, the object's poses in W (the hand's grasp frame at ``X_WG``),
+    the contacts of the fingers ``names``."""
     out = []
     for k, piece in enumerate(pieces):
         if isinstance(piece, Transfer):
             X = X_WG @ piece.X_GO
             c = _contacts(names, piece.p, piece.n)
-            out.append((Kind.INHAND_TRANSFER, f"turn {k}", piece.q, X, tuple(c for _ in X)))
+            out.append(FingerMotion(Kind.INHAND_TRANSFER, f"turn {k}", piece.q, X, tuple(c for _ in X)))
         else:
             assert isinstance(piece, Regrasp)
             X = np.repeat((X_WG @ piece.before.X_GO)[None], len(piece.q), axis=0)
@@ -54,7 +66,7 @@ def piece_motions(pieces, names: list[str], X_WG: np.ndarray) -> list[tuple]:
             lifted = _contacts(names, before.p, before.n, skip=piece.finger)
             contacts = (_contacts(names, before.p, before.n),) + (lifted,) * (len(piece.q) - 2) + (
                 _contacts(names, after.p, after.n),)
-            out.append((Kind.INHAND_REGRASP, f"{names[piece.finger]} steps {k}", piece.q, X, contacts))
+            out.append(FingerMotion(Kind.INHAND_REGRASP, f"{names[piece.finger]} steps {k}", piece.q, X, contacts))
     return out
 
 

@@ -70,18 +70,17 @@ def handover(carry: str, place: str, a: SingleConfig, gid_a: str, ex: ExchangeCo
             Step(Transition(Kind.TRANSFER, held_t, held_t, place), (ex.retreat, place, b.lift[::-1]))]
 
 
-def inhand(label: str, a: SingleConfig, gid_a: str, motions: list[tuple], b: SingleConfig, gid_b: str) -> list[Step]:
-    """The hand of ``a`` lifts the object, its fingers turn it (``motions``: per piece the
-    kind, label, waypoints (k, nq), object poses (k, 4, 4) and contacts, from
-    :func:`dexterous.record.piece_motions`) from grasp ``gid_a`` to ``gid_b`` while the arm
+def inhand(label: str, a: SingleConfig, gid_a: str, motions: list, b: SingleConfig, gid_b: str) -> list[Step]:
+    """The hand of ``a`` lifts the object, its fingers turn it (``motions``: the
+    :class:`dexterous.record.FingerMotion` of each piece) from grasp ``gid_a`` to ``gid_b`` while the arm
     holds still, and it carries the object (query ``label``:place) down to ``b``'s
     placement (seed 003 as a move of seed 001's graph)."""
     h = a.hand
     held_a, held_b, fingers = Mode.held(**{h: gid_a}), Mode.held(**{h: gid_b}), Mode(inhand=h)
     out = [Step(Transition(Kind.TRANSFER, held_a, held_a, label + ":lift"), (a.lift,))]
-    for kind, name, q, X, contacts in motions:
-        out.append(Step(Transition(kind, fingers, fingers, name, (h,)), (q,), X, contacts))
-    end = motions[-1][2][-1]
+    for m in motions:
+        out.append(Step(Transition(m.kind, fingers, fingers, m.label, (h,)), (m.q,), m.X_WO, m.contacts))
+    end = motions[-1].q[-1]
     out.append(Step(Transition(Kind.TRANSFER, held_b, held_b, label + ":place"), (end[None], label + ":place",
                                                                                b.lift[::-1])))
     return out

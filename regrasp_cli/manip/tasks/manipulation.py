@@ -394,7 +394,7 @@ class _Graph:
         if e.kind == EdgeKind.TRANSFER:
             return [Query(label, ca.lift[-1], cb.lift[-1], self._held(e.a))]
         if e.kind == EdgeKind.INHAND:
-            return [Query(label + ":place", self.inhands[e][-1][2][-1], cb.lift[-1], self._held(e.b))]
+            return [Query(label + ":place", self.inhands[e][-1].q[-1], cb.lift[-1], self._held(e.b))]
         ex = self.exchanges[e]
         return [Query(label + ":carry", ca.lift[-1], ex.approach[0], self._held(e.a)),
                 Query(label + ":place", ex.retreat[-1], cb.lift[-1], self._held(e.b))]
