@@ -658,6 +658,7 @@ class InhandPlanning:
     gait_m: float = 0.012
     smooth: bool = True
     mode: str = "single-query"
+    contact_tolerance: float = 0.002  # m: fingertip-object penetration at a contact (the grasp search's; not a field)
 
 
 @dataclass(frozen=True)
@@ -674,7 +675,7 @@ class InhandSpec:
     X_GO_goal: np.ndarray  # (4, 4) object goal pose in G (its position the start's when not given)
     start_grasp: Mapping[str, tuple[float, ...]] | None  # finger name -> contact point in O; None: find one
     planning: InhandPlanning
-    obstacles: tuple[ObstacleSpec, ...] = ()  # poses (X_WO) in G here: a nearby surface, a wall
+    obstacles: tuple[ObstacleSpec, ...] = ()  # poses (X_WO) in G as read; in W in a loaded problem
 
 
 def load_inhand_spec(path: str | Path) -> InhandSpec:

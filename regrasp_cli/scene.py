@@ -1,7 +1,11 @@
 """A loaded planning problem: scene.yaml resolved into robot, object, obstacles and task.
 
 The :class:`Problem` is immutable: planning stages build the collision worlds they need
-from it (object static at a pose, or held by a hand) with :meth:`Problem.world`.
+from it (object static at a pose, or held by a hand) with :meth:`Problem.world`.  It is
+the problem of every task: a pick-and-place scene's (``spec`` a :class:`SceneSpec`) or an
+in-hand scene's (``spec`` an :class:`~regrasp_cli.config.InhandSpec` whose obstacles are
+posed in W, the robot holding its wrist at ``q_start == q_goal``;
+:func:`regrasp_cli.dexterous.task.load_inhand_problem`).
 """
 
 from __future__ import annotations
@@ -11,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from regrasp_cli.config import ObstacleSpec, SceneSpec, load_scene_spec
+from regrasp_cli.config import InhandSpec, ObstacleSpec, SceneSpec, load_scene_spec
 from regrasp_cli.errors import InputError
 from regrasp_cli.model.collision import CollisionOptions, CollisionWorld, ObjectPlacement, collision_world
 from regrasp_cli.model.objects import ObjectMesh, load_object_mesh
@@ -22,7 +26,7 @@ from regrasp_cli.store import sha256_file, sha256_params
 
 @dataclass(frozen=True)
 class Problem:
-    spec: SceneSpec
+    spec: SceneSpec | InhandSpec  # obstacles posed in W
     robot: Robot
     object: ObjectMesh
     disabled: DisabledPairs

@@ -45,7 +45,7 @@ def test_the_ball_is_turned_by_finger_gaits_and_the_plan_is_valid(planned):
     assert set(kinds) == {"inhand-transfer", "inhand-regrasp"} and d["task"] == "inhand"
     goal = np.array(d["placements"][1]["pose"])
     assert np.allclose(d["phases"][-1]["object_poses"][-1], goal, atol=1e-9)
-    assert d["stats"]["regrasps"] == kinds.count("inhand-regrasp") > 0
+    assert d["stats"]["counts"]["finger_regrasps"] == kinds.count("inhand-regrasp") > 0
     assert validate_plan(out).valid
 
 
@@ -181,8 +181,8 @@ def test_the_fingers_keep_off_a_wall_the_open_hand_would_hit(tmp_path, cache_dir
 
     scene = ROOT / "regrasp_cli" / "data" / "scenes" / "inhand_ball_wall.yaml"
     problem = load_inhand_problem(scene, cache_dir)
-    world = collision_world(problem.robot, problem.obstacles, problem.disabled.links())
-    assert ("f0_distal", "obstacle:wall") in world.colliding_pairs(problem.q_fixed)  # the hand open
+    world = collision_world(problem.robot, problem.spec.obstacles, problem.disabled.links())
+    assert ("f0_distal", "obstacle:wall") in world.colliding_pairs(problem.q_start)  # the hand open
     out = tmp_path / "wall.json"
     result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", out, "--no-timings")
     assert result.exit_code == 0, result.output
@@ -198,12 +198,12 @@ def test_progress_counts_every_expansion_of_every_tree(cache_dir, planned):
 
     problem = load_inhand_problem(SCENE, cache_dir)
     calls = []
-    out = plan_inhand(problem, cache_dir, problem.spec.planning.seed, lambda done, budget: calls.append((done, budget)))
+    out = plan_inhand(problem, problem.spec.planning.seed, lambda done, budget: calls.append((done, budget)))
     assert out.failure is None
-    n = out.stats["iterations"]
+    n = out.counts["iterations"]
     assert calls == [(k, problem.spec.planning.nodes) for k in range(1, n + 1)]
     _, d = planned
-    assert d["stats"]["iterations"] == n
+    assert d["stats"]["counts"]["iterations"] == n
 
 
 def test_validate_rejects_a_lifted_fingertip_that_grazes_the_object(tmp_path, planned):

@@ -373,17 +373,17 @@ def test_a_moved_obstacle_reuses_the_roadmap_and_the_plan_is_valid(default_plan,
 def test_a_plan_its_validation_refuses_is_written_failed(solved, cache_dir, plan_dir, monkeypatch):
     """The plan is written, then validated: when the validator refuses it, the file is
     written again with status failed at stage validation (it said solved, exit 1)."""
-    from regrasp_cli.commands import validate as command
-    from regrasp_cli.manip.status import PlanningFailed, Stage
+    from regrasp_cli import pipeline
+    from regrasp_cli.checks import Issue, ValidationReport
 
-    def refuse(out_file, console):
-        raise PlanningFailed(Stage.VALIDATION, "the written plan fails 1 check(s); first: a test's refusal")
+    def refuse(out_file, jobs):
+        return ValidationReport((Issue(None, None, "grasp", "a test's refusal"),), 0, {})
 
-    monkeypatch.setattr(command, "check_written", refuse)
+    monkeypatch.setattr(pipeline, "validate_plan", refuse)
     out = plan_dir / "refused.json"
     result = plan(cache_dir, out)
     assert result.exit_code == 1, (result.output, result.exception)
     d = json.loads(out.read_text())
     assert d["status"] == "failed" and len(d["phases"]) == len(PHASES)
     assert d["failure"] == {"stage": "validation", "transition": None,
-                            "reason": "the written plan fails 1 check(s); first: a test's refusal"}
+                            "reason": "the written plan fails 1 check(s); first: grasp: a test's refusal"}

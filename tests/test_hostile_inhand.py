@@ -162,7 +162,7 @@ class _Told(QuietBuilder):
 
 
 def test_a_damaged_roadmap_is_learned_again_with_a_line_saying_why(tmp_path, cache_dir):
-    problem = load_inhand_problem(SCENE, cache_dir)
+    problem = replace(load_inhand_problem(SCENE, cache_dir), cache_dir=tmp_path)  # its own roadmap folder
     o = LearnOptions(roots=2)
     r = replace(GaitTreeOptions(), step_rad=problem.spec.planning.step_rad)  # as inhand_roadmap reads them
     g = GaitOptions(gait_m=problem.spec.planning.gait_m)
@@ -170,10 +170,10 @@ def test_a_damaged_roadmap_is_learned_again_with_a_line_saying_why(tmp_path, cac
     path.parent.mkdir(parents=True)
     path.write_bytes(b"\x89HDF\r\n\x1a\n truncated")
     told = _Told()
-    _, _, built = inhand_roadmap(problem, tmp_path, o, builder=told)
+    _, _, built = inhand_roadmap(problem, o, builder=told)
     assert built and len(told.notices) == 1
     assert told.notices[0].startswith(f"rebuilding {path}: damaged artefact: ")
-    _, _, built = inhand_roadmap(problem, tmp_path, o, builder=told)
+    _, _, built = inhand_roadmap(problem, o, builder=told)
     assert not built and len(told.notices) == 1  # the file learned again is fresh
 
 

@@ -18,7 +18,10 @@ Rules:
 (e) every ``regrasp_cli`` import names a module that exists (lazy imports inside
     functions are not exercised by importing the package);
 (f) no module imports another's private name (``from m import _x`` or ``m._x``);
-(g) no import cycle, imports inside functions included (issue 42).
+(g) no import cycle, imports inside functions included (issue 42);
+(h) commands and benchmarks solve and record a task only through :mod:`regrasp_cli.pipeline`
+    (issue 42: one pipeline), which the FORBIDDEN entries of ``manip.record`` and
+    ``manip.tasks`` say.
 
 ``test_checker_*`` run the checker on tiny synthetic sources with known bad edges, so
 that the rules cannot pass vacuously.
@@ -43,11 +46,11 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("roadmap.*",),
     ("trajectory", "replay", "artefacts"),
     ("manip.*", "dexterous.*", "checks", "validate", "validate_inhand"),
-    ("show.*", "bench.*", "export", "simulate"),
+    ("show.*", "bench.*", "export", "simulate", "pipeline"),
     ("commands.*", "cli"),
 )
 LAYER_NAMES = ("L0 core", "L1 model/grasp/scene/motion", "L2 roadmap", "L3 plan format/replay/artefacts",
-               "L4 planner/validator", "L5 show/bench/export/simulate", "L6 commands/cli")
+               "L4 planner/validator", "L5 show/bench/export/simulate/pipeline", "L6 commands/cli")
 
 # (importer, importer may not import this module or anything under it, unless it is one of these)
 FORBIDDEN: tuple[tuple[str, str, tuple[str, ...], str], ...] = (
@@ -61,6 +64,9 @@ FORBIDDEN: tuple[tuple[str, str, tuple[str, ...], str], ...] = (
     ("export", "manip", ("manip.modes",), "the export samples the plan file, not the planner"),
     ("simulate", "manip", ("manip.modes",), "the physics check replays the plan file, not the planner"),
     ("simulate", "validate", (), "the physics check is independent of the validator"),
+    ("commands.*", "manip.record", (), "every task is recorded by the one pipeline (pipeline.run_task)"),
+    ("bench.*", "manip.record", (), "every task is recorded by the one pipeline (pipeline.run_task)"),
+    ("commands.*", "manip.tasks", (), "every task is solved by the one pipeline (pipeline.run_task)"),
 )
 
 CLI_MODULES = ("commands.*", "cli")  # the only modules that may print with rich or use click

@@ -3,9 +3,11 @@
 
 For each hand, each of its objects and each of ``goals`` goal orientations (uniform on
 SO(3), goal k drawn from seed k, about the object's own centre, which starts at the
-hand's grasp frame), the run writes the in-hand scene (``OUT/scenes/``), plans it as
-`regrasp inhand plan` does, writes the plan (``OUT/plans/``) and checks it with
-`regrasp validate`.  A run is solved when the plan is valid.
+hand's grasp frame), the run writes the in-hand scene (``OUT/scenes/``); the runs are
+then those of any suite (:mod:`regrasp_cli.bench.runner`: the pipeline of `regrasp
+inhand plan`, each forked with its budget, the plan written to ``OUT/plans/`` and checked
+with `regrasp validate`, the same record with the run's hand, object, goal and goal angle).
+A run is solved when the plan is valid.
 
 Fields: ``name``; ``hands`` (each ``{robot, side, label, objects}``: a robot.yaml path
 relative to the suite or ``builtin:NAME``, the hand's side (default right), a label
@@ -17,7 +19,8 @@ folders (letters, digits, '.', '_', '-', as a pick-and-place suite's name); ``go
 (runs per hand and object, default 20), from ``first_goal`` (default 0); ``nodes`` (the trees' budget of expansions, default a
 scene's, ``InhandPlanning.nodes``); ``mode`` (``single-query`` or ``multi-query``, default
 single-query: with multi-query, each hand and object's roadmap is learned before the
-runs, and its time reported apart).  Every error is an :class:`InputError` naming the
+runs, and its time reported apart); ``budget_s`` (seconds a run may take before it is
+killed, default 600).  Every error is an :class:`InputError` naming the
 file and field, the suite's for a bad hand or object found only when a run's scene is
 loaded (each hand and object's is loaded before anything is written).
 """
@@ -33,9 +36,12 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
+from regrasp_cli.bench.runner import RunItem
 from regrasp_cli.bench.suite import MAX_SEEDS, file_name
 from regrasp_cli.config import INHAND_MODES, Fields, InhandPlanning, read_yaml, resolve_path
-from regrasp_cli.errors import InputError, RegraspError, shown
+from regrasp_cli.dexterous.task import PLANNER
+from regrasp_cli.errors import InputError, shown
+from regrasp_cli.roadmap.build import RoadmapOptions
 
 INHAND_SUITE_FORMAT = "regrasp.inhand-bench/1"
 
@@ -68,6 +74,7 @@ class InhandSuite:
     nodes: int = InhandPlanning.nodes
     mode: str = "single-query"
     skipped: tuple[str, ...] = ()  # optional meshes not found
+    budget_s: float = 600.0
 
 
 def suite_format(path: str | Path) -> str | None:
@@ -80,7 +87,7 @@ def load_inhand_suite(path: str | Path) -> InhandSuite:
     """Read and check an in-hand suite file."""
     file, data = read_yaml(path)
     f = Fields(file, data)
-    f.only("format", "name", "hands", "objects", "goals", "first_goal", "nodes", "mode")
+    f.only("format", "name", "hands", "objects", "goals", "first_goal", "nodes", "mode", "budget_s")
     if f.str("format") != INHAND_SUITE_FORMAT:
         raise f.error("format", f"expected {shown(INHAND_SUITE_FORMAT)}, found {shown(f.data['format'])}")
     objects, skipped = _objects(f)
@@ -94,7 +101,8 @@ def load_inhand_suite(path: str | Path) -> InhandSuite:
         raise f.error("mode", f"expected one of {', '.join(INHAND_MODES)}, found {shown(mode)}")
     name = file_name(file, "name", f.str("name"), "the results folder")
     return InhandSuite(file, name, hands, objects, tuple(range(first, first + goals)),
-                       f.int("nodes", InhandPlanning.nodes, minimum=1), mode, skipped)
+                       f.int("nodes", InhandPlanning.nodes, minimum=1), mode, skipped,
+                       f.float("budget_s", InhandSuite.budget_s, positive=True))
 
 
 def _objects(f: Fields) -> tuple[tuple[InhandObject, ...], tuple[str, ...]]:
@@ -146,10 +154,11 @@ def _hands(f: Fields, labels: set[str]) -> tuple[InhandHand, ...]:
     return tuple(out)
 
 
-def items_of(suite: InhandSuite, out: Path, cache_dir: Path | None) -> list[dict]:
+def items_of(suite: InhandSuite, out: Path, cache_dir: Path) -> list[RunItem]:
     """One run per hand, object and goal, its scene written to ``out/scenes/`` once each
     hand and object's problem has loaded as the runs will load it: a bad one is an
-    InputError naming the suite's field, and nothing is written."""
+    InputError naming the suite's field, and nothing is written.  Plans go to
+    ``out/plans/``, named as the scenes."""
     from regrasp_cli.model.objects import load_object_mesh
 
     scenes: dict[Path, dict] = {}
@@ -166,10 +175,14 @@ def items_of(suite: InhandSuite, out: Path, cache_dir: Path | None) -> list[dict
                     raise InputError(suite.file, f"{h.field}.label", f"with object {o.label}, its scenes are named "
                                      f"as another hand and object's ({path.name}): choose another label")
                 scenes[path] = _scene(suite, h, o, [float(-x) for x in centre], rpy, k)
-                items.append({"hand": h.label, "object": o.label, "goal": k, "scene": str(path),
-                              "goal_angle_rad": float(Rotation.from_euler("xyz", rpy).magnitude())})
+                labels = (("hand", h.label), ("object", o.label), ("goal", k),
+                          ("goal_angle_rad", float(Rotation.from_euler("xyz", rpy).magnitude())))
+                items.append(RunItem(path.stem, str(path.resolve()), PLANNER, k, str(Path(cache_dir).resolve()),
+                                     str((out / "plans" / f"{path.stem}.json").resolve()), suite.budget_s,
+                                     RoadmapOptions.nodes, None, labels=labels))
             _check_scene(suite, h, o, scenes[path], cache_dir)  # the goals' scenes differ in goal and seed only
     (out / "scenes").mkdir(parents=True, exist_ok=True)
+    (out / "plans").mkdir(exist_ok=True)
     for path, scene in scenes.items():
         path.write_text(yaml.safe_dump(scene, sort_keys=False))
     return items
@@ -212,7 +225,7 @@ def _suite_field(field: str | None, h: InhandHand, o: InhandObject) -> str:
     return {"robot": f"{h.field}.robot", "hand": f"{h.field}.side"}.get(head, h.field)
 
 
-def prepare(items: list[dict], cache_dir: Path, mode: str, notice=None) -> dict[str, float]:
+def prepare(items: list[RunItem], cache_dir: Path, mode: str, notice=None) -> dict[str, float]:
     """Each hand's artefacts (finger workspaces, self-collision pairs) built once before
     the workers; with multi-query, each hand and object's roadmap too: its learning time
     per ``hand/object`` (0 when found fresh in the cache).  ``notice(text)`` is told
@@ -220,47 +233,16 @@ def prepare(items: list[dict], cache_dir: Path, mode: str, notice=None) -> dict[
     from regrasp_cli.dexterous.task import inhand_roadmap, load_inhand_problem
 
     learned = {}
-    for first in {(r["hand"], r["object"] if mode == "multi-query" else ""): r for r in items}.values():
-        problem = load_inhand_problem(first["scene"], cache_dir)
+    runs = [(dict(it.labels), it.scene_file) for it in items]
+    for labels, scene in {(r["hand"], r["object"] if mode == "multi-query" else ""): (r, f) for r, f in runs}.values():
+        problem = load_inhand_problem(scene, cache_dir)
         if mode == "multi-query":
             if notice is not None:
-                notice(f"the {first['hand']} roadmap for the {first['object']} (learned once, or found in the cache)")
+                notice(f"the {labels['hand']} roadmap for the {labels['object']} (learned once, or found in the cache)")
             t = time.perf_counter()
-            _, _, built = inhand_roadmap(problem, cache_dir)
-            learned[f"{first['hand']}/{first['object']}"] = time.perf_counter() - t if built else 0.0
+            _, _, built = inhand_roadmap(problem)
+            learned[f"{labels['hand']}/{labels['object']}"] = time.perf_counter() - t if built else 0.0
     return learned
-
-
-def run_item(item: dict, out: Path, cache_dir: Path) -> dict:
-    """Plan, write and validate one run: its record (solved, stage, times, counts)."""
-    from regrasp_cli.dexterous.record import make_inhand_plan
-    from regrasp_cli.dexterous.task import load_inhand_problem, plan_inhand
-    from regrasp_cli.trajectory import write_plan
-    from regrasp_cli.validate import validate_plan
-
-    rec = dict(item)
-    t0 = time.perf_counter()
-    try:
-        problem = load_inhand_problem(item["scene"], cache_dir)
-        o = plan_inhand(problem, cache_dir, problem.spec.planning.seed)
-        plan_file = out / "plans" / (Path(item["scene"]).stem + ".json")
-        plan_file.parent.mkdir(parents=True, exist_ok=True)
-        write_plan(plan_file, make_inhand_plan(problem, o, problem.spec.planning.seed, plan_file, cache_dir, True))
-        rec.update({k: v for k, v in o.stats.items() if k != "gs_failures"})
-        if o.failure is not None:
-            rec.update(solved=False, stage=o.failure.stage.value, reason=o.failure.reason)
-        else:
-            t = time.perf_counter()
-            report = validate_plan(plan_file)
-            rec.update(solved=report.valid, validation_s=time.perf_counter() - t,
-                       stage=None if report.valid else "validation",
-                       reason=None if report.valid else str(report.issues[0]))
-    except RegraspError as exc:  # input refused: a failure of the run, with its one line
-        rec.update(solved=False, stage="input", reason=str(exc))
-    except Exception as exc:  # noqa: BLE001 - a crash is a failed run, recorded, not the end of the suite
-        rec.update(solved=False, stage="crash", reason=repr(exc))
-    rec["total_s"] = time.perf_counter() - t0
-    return rec
 
 
 def summary(records: list[dict]) -> str:
@@ -270,10 +252,10 @@ def summary(records: list[dict]) -> str:
     for hand, obj in dict.fromkeys((r["hand"], r["object"]) for r in records):
         rs = [r for r in records if (r["hand"], r["object"]) == (hand, obj)]
         ok = [r for r in rs if r["solved"]]
-        t = np.array([r["planning_s"] for r in rs if "planning_s" in r] or [np.nan])
+        t = np.array([r["planner_s"] for r in rs if r["planner_s"] is not None] or [np.nan])
 
         def med(k: str) -> str:
-            return f"{np.median([r[k] for r in ok]):.0f}" if ok else "–"
+            return f"{np.median([r['counts'][k] for r in ok]):.0f}" if ok else "–"
 
         fails: dict[str, int] = {}
         for r in rs:
@@ -281,14 +263,14 @@ def summary(records: list[dict]) -> str:
                 fails[r["stage"]] = fails.get(r["stage"], 0) + 1
         lines.append(f"| {hand} | {obj} | {len(ok)}/{len(rs)} | {np.median(t):.2f} | "
                      f"{np.percentile(t, 25):.2f}–{np.percentile(t, 75):.2f} | {med('nodes_generated')} | "
-                     f"{med('nodes_kept')} | {med('regrasps')} | {med('transfers')} | "
+                     f"{med('nodes_kept')} | {med('finger_regrasps')} | {med('transfers')} | "
                      f"{', '.join(f'{k} {v}' for k, v in fails.items()) or '–'} |")
     return "\n".join(lines) + "\n"
 
 
-def check_overrides(planners: str | None, budget_s: float | None, iterations: int | None) -> None:
+def check_overrides(planners: str | None, iterations: int | None) -> None:
     """The pick-and-place suite's options have no meaning here: refused, not ignored."""
-    for name, value in (("--planners", planners), ("--budget-s", budget_s), ("--iterations", iterations)):
+    for name, value in (("--planners", planners), ("--iterations", iterations)):
         if value is not None:
             raise InputError(None, name, f"not for an in-hand suite ({INHAND_SUITE_FORMAT}): its runs have the "
                                          f"suite's nodes as their budget")

@@ -18,6 +18,7 @@ One record per run (a JSON object, one line of ``runs.jsonl``)::
     stages_s: {double grasps, exchange, queries, timing}
     queries: {grasp|carry|place|rest: {n, invalid_edges, rrt_calls, planning_s, validation_s}}
     validation: {valid, issues, first_issues, configurations_checked} or None
+    counts                                          the outcome's deterministic counts (the styles apart)
     path_length                                     sum of weighted joint-space segment lengths
     regrasps                                        changes of the holding hand (1: a hand-over)
     motion_s, waypoints, plan                       plan duration, waypoint count, plan file
@@ -45,7 +46,7 @@ from typing import Callable
 
 import numpy as np
 
-from regrasp_cli.manip.status import PlanningFailed, Stage
+from regrasp_cli.manip.status import Stage
 from regrasp_cli.bench.suite import DEFAULT_ITERATIONS, REFERENCE, Suite
 
 
@@ -66,6 +67,7 @@ class RunItem:
     style: str = "auto"
     exhaustive: int = 0
     sampler: str = "faces"
+    labels: tuple[tuple[str, object], ...] = ()  # more fields of its record (an in-hand run's hand, object, goal)
 
 
 def scene_labels(suite: Suite) -> dict[Path, str]:
@@ -163,27 +165,33 @@ def _stamp(scene_file: str, cache_dir: str) -> tuple:
     return tuple((str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in files if p.exists())
 
 
-@functools.lru_cache(maxsize=4)
-def _context(scene_file: str, cache_dir: str, with_roadmap: bool, roadmap_nodes: int, grasp_target: int | None,
-             stamp: tuple):
-    """Problem, grasp lists, Roadmap (or None), artefact hashes and path-length weights of
-    a scene, loaded once per worker process (the parent built the artefacts) and again
-    whenever the ``stamp`` of its inputs changes."""
-    from regrasp_cli.artefacts import load_artefacts
-    from regrasp_cli.manip.queries import Roadmap
-    from regrasp_cli.motion.local import joint_weights
-    from regrasp_cli.scene import load_problem
+def request_of(item: RunItem):
+    """The pipeline's :class:`~regrasp_cli.pipeline.Request` of a run: one process, the
+    suite's RRT-Connect budget for every planner, OMPL's wall-clock guard the run's budget."""
+    from regrasp_cli.pipeline import Request
 
-    problem = load_problem(scene_file, Path(cache_dir))
-    lists, art, hashes = load_artefacts(Path(scene_file), Path(cache_dir), problem, False, 1, with_roadmap,
-                                        None, roadmap_nodes, grasp_target)
+    return Request(planner=item.planner, style=item.style, seed=item.seed, jobs=1, sampler=item.sampler,
+                   roadmap_nodes=item.roadmap_nodes, grasp_target=item.grasp_target, iterations=item.iterations,
+                   ompl_time=item.budget_s)
+
+
+@functools.lru_cache(maxsize=4)
+def _context(scene_file: str, cache_dir: str, request, stamp: tuple):
+    """The loaded task (:func:`~regrasp_cli.pipeline.load_task`) and path-length weights of
+    a scene, loaded once per worker process (the parent built the artefacts; placements an
+    object does not have are found missing here in tenths of a second) and again whenever
+    the ``stamp`` of its inputs changes."""
+    from regrasp_cli.motion.local import joint_weights
+    from regrasp_cli.pipeline import load_task
+
+    loaded = load_task(Path(scene_file), Path(cache_dir), request)
     # one metric for every planner, so that path lengths compare
-    return problem, lists, Roadmap.of(art) if art is not None else None, hashes, joint_weights(problem.robot)
+    return loaded, joint_weights(loaded.problem.robot)
 
 
 def _item_context(item: RunItem):
-    return _context(item.scene_file, item.cache_dir, item.planner == REFERENCE, item.roadmap_nodes,
-                    item.grasp_target, _stamp(item.scene_file, item.cache_dir))
+    request = replace(request_of(item), seed=None, iterations=None, ompl_time=None)  # what loading reads
+    return _context(item.scene_file, item.cache_dir, request, _stamp(item.scene_file, item.cache_dir))
 
 
 def path_length(phases, weights: np.ndarray) -> float:
@@ -207,11 +215,11 @@ def regrasps(phases) -> int:
 
 
 def _base(item: RunItem) -> dict:
-    return {"scene": item.scene, "planner": item.planner, "seed": item.seed, "solved": False,
+    return {"scene": item.scene, **dict(item.labels), "planner": item.planner, "seed": item.seed, "solved": False,
             "stage": None, "transition": None, "reason": None, "total_s": None, "planner_s": None, "write_s": None,
             "validation_s": None, "stages_s": {}, "queries": {}, "validation": None, "path_length": None,
             "regrasps": None, "motion_s": None, "waypoints": None, "plan": None, "peak_rss_mb": None,
-            "style": None, "placements": None, "styles": None, "exhaustive": None}
+            "style": None, "placements": None, "styles": None, "exhaustive": None, "counts": None}
 
 
 def peak_rss_mb() -> float:
@@ -221,45 +229,23 @@ def peak_rss_mb() -> float:
 
 
 def execute(item: RunItem) -> dict:
-    """The run itself, in this process; raises whatever the planner raises."""
-    from regrasp_cli.manip.context import OnlineOptions
-    from regrasp_cli.manip.record import make_plan
-    from regrasp_cli.artefacts import placements_for_style
+    """The run itself, in this process (:func:`regrasp_cli.pipeline.run_task`); raises
+    whatever the planner raises."""
     from regrasp_cli.manip.tasks import manipulation
-    from regrasp_cli.trajectory import write_plan, write_refused
-    from regrasp_cli.validate import validate_plan
+    from regrasp_cli.pipeline import run_task
 
-    problem, lists, roadmap, hashes, weights = _item_context(item)
+    loaded, weights = _item_context(item)
     rec = _base(item)
-    # the same RRT-Connect budget for every planner; OMPL's wall-clock guard is the run's budget
-    default = OnlineOptions()
-    options = OnlineOptions(planner=item.planner, jobs=1, ompl_time=item.budget_s,
-                            rrt=replace(default.rrt, max_iterations=item.iterations))
     out_file = Path(item.plan_file)
-    t0 = time.perf_counter()
     graph = {}
-    rm = roadmap if item.planner == REFERENCE else None
-    # built if missing (a few tenths of a second, under the artefact's lock): an object with no
-    # stable placement has no file, and refusing to build made such runs crash under auto
-    stable = placements_for_style(item.style, Path(item.cache_dir), problem, True)[0]
-    outcome = manipulation.plan_style(problem, lists, rm, options, item.seed, item.style, stable, keep=graph,
-                                          sampler=item.sampler)
-    t1 = time.perf_counter()
-    plan = make_plan(problem, lists, outcome, options, item.seed, out_file, Path(item.cache_dir), hashes,
-                     timings=True)
-    write_plan(out_file, plan)
-    t2 = time.perf_counter()
-    report = validate_plan(out_file, jobs=1) if outcome.failure is None else None
-    refused = None if report is None or report.valid else PlanningFailed(Stage.VALIDATION, report.refusal())
-    if refused is not None:
-        write_refused(out_file, plan, refused.as_dict())
-    t3 = time.perf_counter()
+    run = run_task(loaded, request_of(item), out_file, check=True, timings=True, keep=graph, validate_jobs=1)
+    outcome, plan, report = run.outcome, run.plan, run.report
     rec.update({
-        "total_s": t3 - t0, "planner_s": t1 - t0, "write_s": t2 - t1, "validation_s": t3 - t2,
-        "stages_s": {k: float(v) for k, v in outcome.stages.items()},
+        "total_s": sum(run.seconds.values()), "planner_s": run.seconds["planner"], "write_s": run.seconds["write"],
+        "validation_s": run.seconds["validation"], "stages_s": {k: float(v) for k, v in outcome.stages.items()},
         "queries": {q: {"n": s.nodes, "invalid_edges": s.invalid_edges, "rrt_calls": s.rrt_calls,
                         "planning_s": s.planning_s, "validation_s": s.validation_s} for q, s in outcome.transitions.items()},
-        "plan": out_file.name,
+        "plan": out_file.name, "counts": {k: v for k, v in outcome.counts.items() if k != "styles"},
     })
     if outcome.failure is not None:
         f = outcome.failure
@@ -270,16 +256,18 @@ def execute(item: RunItem) -> dict:
                 "validation": {"valid": report.valid, "issues": len(report.issues),
                                "first_issues": [str(i) for i in report.issues[:3]],
                                "configurations_checked": int(report.configurations_checked)}})
-    rec.update({"style": outcome.counts.get("style", "handover"), "placements": outcome.counts.get("placements", 0),
-                "styles": outcome.counts.get("styles")})
+    if outcome.task != "inhand":
+        rec.update({"style": outcome.counts.get("style", "handover"), "placements": outcome.counts.get("placements", 0),
+                    "styles": outcome.counts.get("styles")})
     if item.exhaustive and "graph" in graph:
         t4 = time.perf_counter()
-        fewer, solved = manipulation.fewer_regrasps(graph["graph"], stable, rec["regrasps"], item.exhaustive)
+        fewer, solved = manipulation.fewer_regrasps(graph["graph"], list(loaded.stable), rec["regrasps"],
+                                                    item.exhaustive)
         rec["exhaustive"] = {"fewer_exist": fewer, "edges_solved": solved, "s": time.perf_counter() - t4}
-    if refused is None:
+    if run.refused is None:
         rec["solved"] = True
     else:
-        rec["stage"], rec["reason"] = refused.stage.value, refused.reason
+        rec["stage"], rec["reason"] = run.refused.stage.value, run.refused.reason
     return rec
 
 

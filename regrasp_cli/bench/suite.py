@@ -139,11 +139,16 @@ def with_overrides(suite: Suite, seeds: int | None = None, planners: str | None 
         names = [p.strip() for p in planners.split(",") if p.strip()]
         suite = replace(suite, planners=_planners(None, "--planners", names))
     if budget_s is not None:
-        if not (budget_s > 0 and math.isfinite(budget_s)):
-            raise InputError(None, "--budget-s", f"expected a number of seconds > 0, found {budget_s}")
-        suite = replace(suite, budget_s=float(budget_s))
+        suite = replace(suite, budget_s=checked_budget(budget_s))
     if iterations is not None:
         if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
             raise InputError(None, "--iterations", f"expected an integer >= 1, found {iterations}")
         suite = replace(suite, iterations=iterations)
     return suite
+
+
+def checked_budget(budget_s: float) -> float:
+    """The command line's ``--budget-s``: finite seconds > 0, else an InputError."""
+    if not (budget_s > 0 and math.isfinite(budget_s)):
+        raise InputError(None, "--budget-s", f"expected a number of seconds > 0, found {budget_s}")
+    return float(budget_s)

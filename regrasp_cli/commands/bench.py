@@ -118,12 +118,12 @@ def run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int
         raise InputError(None, "--scheduler", "only for --backend dask")
     from regrasp_cli.bench.inhand import INHAND_SUITE_FORMAT, suite_format
 
-    if suite_format(suite_file) == INHAND_SUITE_FORMAT:
-        if backend != "loky":
-            raise InputError(None, "--backend", "an in-hand suite runs on local processes only")
-        return run_inhand_bench(suite_file, cache_dir, out_dir, jobs, seeds, planners, budget_s, iterations, console)
+    inhand_suite = suite_format(suite_file) == INHAND_SUITE_FORMAT
     client = dask_client(scheduler) if backend == "dask" else None
     try:
+        if inhand_suite:
+            return run_inhand_bench(suite_file, cache_dir, out_dir, jobs, seeds, planners, budget_s, iterations,
+                                    console, client)
         return _run_bench(suite_file, cache_dir, out_dir, jobs, seeds, planners, budget_s, console, client,
                           iterations)
     finally:
@@ -199,21 +199,24 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
 
 def run_inhand_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: int, seeds: int | None,
                      planners: str | None, budget_s: float | None, iterations: int | None,
-                     console: Console) -> list[dict]:
+                     console: Console, client=None) -> list[dict]:
     """An in-hand suite (:mod:`regrasp_cli.bench.inhand`): ``--seeds N`` runs goals 0 ..
-    N-1; results as a pick-and-place suite's (runs.jsonl, summary.md, meta.json, plans/,
-    and the scenes/ the runs planned)."""
+    N-1, ``--budget-s`` overrides the suite's budget per run; the runs are any suite's
+    (:func:`~regrasp_cli.bench.runner.run_items`: forked with their budget, in loky or
+    Dask workers); results as a pick-and-place suite's (runs.jsonl, summary.md,
+    meta.json, plans/, and the scenes/ the runs planned)."""
     from dataclasses import replace
 
-    from joblib import Parallel, delayed
-
     from regrasp_cli.bench import inhand
-    from regrasp_cli.bench.suite import seeds_of
+    from regrasp_cli.bench.runner import run_items
+    from regrasp_cli.bench.suite import checked_budget, seeds_of
 
-    inhand.check_overrides(planners, budget_s, iterations)
+    inhand.check_overrides(planners, iterations)
     suite = inhand.load_inhand_suite(suite_file)
     if seeds is not None:
         suite = replace(suite, goals=seeds_of(None, "--seeds", seeds))
+    if budget_s is not None:
+        suite = replace(suite, budget_s=checked_budget(budget_s))
     out_dir = Path("bench-results") / suite.name if out_dir is None else Path(out_dir)
     check_writable(out_dir, "--output", folder=True)
     err = Console(stderr=True)
@@ -221,19 +224,24 @@ def run_inhand_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jo
         err.print(f"skipped (mesh not found, optional): {label}", markup=False, highlight=False)
     items = inhand.items_of(suite, out_dir, cache_dir)
     learned = inhand.prepare(items, cache_dir, suite.mode, lambda text: err.print(text, markup=False, highlight=False))
+    where = "loky" if client is None else f"dask at {client.scheduler.address}"
     meta = {"machine": machine(), "suite": {"file": str(suite.file), "name": suite.name, "mode": suite.mode,
-                                            "goals": list(suite.goals), "nodes": suite.nodes},
-            "jobs": jobs, "runs": len(items), "roadmap_learning_s": learned}
-    err.print(f"{len(items)} in-hand runs ({suite.mode}), {jobs} job(s)")
+                                            "goals": list(suite.goals), "nodes": suite.nodes,
+                                            "budget_s": suite.budget_s},
+            "jobs": jobs, "backend": where, "runs": len(items), "roadmap_learning_s": learned}
+    err.print(f"{len(items)} in-hand runs ({suite.mode}), {f'{jobs} job(s)' if client is None else where}, "
+              f"budget {suite.budget_s:g} s per run")
     done: list[dict] = []
-    t0 = time.perf_counter()
-    for rec in Parallel(n_jobs=jobs, return_as="generator")(delayed(inhand.run_item)(it, out_dir, cache_dir)
-                                                           for it in items):
+
+    def on_record(rec: dict) -> None:
         done.append(rec)
         state = "solved" if rec["solved"] else f"FAILED at {rec['stage']}: {rec['reason']}"
         err.print(f"[{len(done)}/{len(items)}] {rec['hand']} {rec['object']} goal {rec['goal']}: "
                   f"{rec['total_s']:.1f} s, {state}", markup=False, highlight=False)
         atomic_write_text(out_dir / "runs.jsonl", jsonl(done))
+
+    t0 = time.perf_counter()
+    run_items(items, jobs, on_record, client)
     meta["wall_s"] = time.perf_counter() - t0
     atomic_write_text(out_dir / "meta.json", json.dumps(meta, indent=1, default=_plain) + "\n")
     m = meta["machine"]

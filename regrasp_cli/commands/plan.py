@@ -14,21 +14,16 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from regrasp_cli.artefacts import load_artefacts, placements_for_style
+from regrasp_cli.commands.progress import scene_inputs, self_collision_bar
 from regrasp_cli.commands.report import CliBuilder
-from regrasp_cli.errors import EmptyGraspList, EmptyRoadmap, InputError
-from regrasp_cli.placement.supports import scene_supports
-from regrasp_cli.manip.context import OnlineOptions
+from regrasp_cli.commands.validate import print_validation
+from regrasp_cli.errors import InputError
 from regrasp_cli.manip.ompl_peer import ompl_version
-from regrasp_cli.manip.queries import Roadmap
-from regrasp_cli.manip.record import make_plan
-from regrasp_cli.manip.solve import Outcome, ends_failure
-from regrasp_cli.manip.status import PlanningFailed, Stage
-from regrasp_cli.manip.tasks import handover, manipulation
+from regrasp_cli.manip.solve import Outcome
+from regrasp_cli.pipeline import Request, load_task, run_task
 from regrasp_cli.roadmap.build import RoadmapOptions
-from regrasp_cli.commands.progress import load_problem_shown, scene_inputs
 from regrasp_cli.store import check_writable
-from regrasp_cli.trajectory import Plan, write_plan, write_refused
+from regrasp_cli.trajectory import Plan
 
 
 def print_summary(plan: Plan, outcome: Outcome, console: Console) -> None:
@@ -64,8 +59,6 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
              timings: bool, check: bool, roadmap_nodes: int = RoadmapOptions.nodes, grasp_target: int | None = None,
              console: Console | None = None, style: str = "auto", sampler: str = "faces") -> int:
     """The `plan` command; returns the exit code (0 solved, 1 not)."""
-    from regrasp_cli.commands.validate import check_written
-
     console = console or Console()
     for value, name, least in ((roadmap_nodes, "--roadmap-nodes", 1), (grasp_target, "--grasp-target", 0),
                                (jobs, "--jobs", 1)):
@@ -74,45 +67,22 @@ def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, pla
     check_writable(out_file, "--output", inputs=scene_inputs(scene))  # before the work, not after it
     if planner == "ompl-rrtconnect":
         ompl_version()  # InputError naming the extra before anything is loaded
-    problem = load_problem_shown(scene, cache_dir)
-    if style == "place-regrasp" and not scene_supports(problem.spec.obstacles, problem.spec.supports, scene):
-        raise InputError(scene, "obstacles", "--style place-regrasp puts the object down, and the scene has no "
-                                             "support surface (a box with an axis along z, or an upright cylinder)")
-    seed = problem.spec.planning.seed if seed is None else seed
-    options = OnlineOptions(planner=planner, jobs=jobs)
-    lists, art, hashes, stable = {}, None, {}, []
-    failure = ends_failure(problem, options)  # whatever the style: before building anything for them
-    if failure is None:  # milliseconds: before the grasp lists
-        stable, sha = placements_for_style(style, cache_dir, problem, build, CliBuilder(console))
-        if sha is not None:
-            hashes["placements"] = sha
-    if failure is None:
-        try:
-            lists, art, more = load_artefacts(scene, cache_dir, problem, build, jobs, planner == "roadmap",
-                                              CliBuilder(console), roadmap_nodes, grasp_target)
-            hashes.update(more)
-        except (EmptyGraspList, EmptyRoadmap) as exc:
-            failure = PlanningFailed(Stage.GRASPS if isinstance(exc, EmptyGraspList) else Stage.ROADMAP, exc.message)
-    roadmap = Roadmap.of(art) if art is not None else None
-    if failure is not None:
-        outcome = handover.failed(problem, failure)
-    else:
-        outcome = manipulation.plan_style(problem, lists, roadmap, options, seed, style, stable, sampler=sampler)
-    plan = make_plan(problem, lists, outcome, options, seed, out_file, cache_dir, hashes, timings)
-    write_plan(out_file, plan)
-    if outcome.failure is not None:
-        f = outcome.failure
+    request = Request(planner=planner, style=style, seed=seed, jobs=jobs, sampler=sampler,
+                      roadmap_nodes=roadmap_nodes, grasp_target=grasp_target)
+    with self_collision_bar() as progress:
+        loaded = load_task(scene, cache_dir, request, build, CliBuilder(console), progress)
+    run = run_task(loaded, request, out_file, check, timings)
+    if run.outcome.failure is not None:
+        f = run.outcome.failure
         where = f.stage.value + (f" ({f.transition})" if f.transition else "")
         console.print(f"[red]not solved[/red]: stage {where}: {f.reason}")
         console.print(f"plan (status failed): {out_file}")
-        raise outcome.failure
-    print_summary(plan, outcome, console)
-    if check:
-        try:
-            check_written(out_file, console)
-        except PlanningFailed as exc:
-            write_refused(out_file, plan, exc.as_dict())
-            console.print(f"plan (status failed): {out_file}")
-            raise
+        raise f
+    print_summary(run.plan, run.outcome, console)
+    if run.report is not None:
+        print_validation(run.report, console)
+    if run.refused is not None:
+        console.print(f"plan (status failed): {out_file}")
+        raise run.refused
     console.print(f"plan: {out_file}")
     return 0

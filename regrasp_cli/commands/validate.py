@@ -30,15 +30,3 @@ def print_validation(report: ValidationReport, console: Console) -> None:
         console.print(escape(str(i)))
     n = len(report.issues)
     console.print("valid" if report.valid else f"INVALID: {n} issue{'s' * (n != 1)}")
-
-
-def check_written(out_file, console: Console) -> None:
-    """Validate the plan just written, print the report; PlanningFailed at stage
-    ``validation`` (exit 1) when it fails."""
-    from regrasp_cli.manip.status import PlanningFailed, Stage
-    from regrasp_cli.validate import validate_plan
-
-    report = validate_plan(out_file)
-    print_validation(report, console)
-    if not report.valid:
-        raise PlanningFailed(Stage.VALIDATION, report.refusal())

@@ -2,8 +2,13 @@
 
 The hand's wrist is fixed (the robot at its ``robot_config``, the hand open), the object
 is held in its fingertips from the start pose, and the planner finds transfers and
-finger regrasps that bring it to the goal pose (:mod:`.roadmap`, :mod:`.gait`).  Poses
-are in the hand's grasp frame G.
+finger regrasps that bring it to the goal pose (:mod:`.roadmap`, :mod:`.gait`).  The
+scene gives poses in the hand's grasp frame G; the loaded problem
+(:class:`~regrasp_cli.scene.Problem`, as a pick-and-place scene's) has its obstacles in W.
+:func:`plan_inhand` returns the :class:`~regrasp_cli.manip.solve.Outcome` every task
+returns: one step per transfer or finger regrasp, timed as any plan's
+(:func:`~regrasp_cli.manip.solve.time_steps`: a stop at every waypoint, where a contact
+changes or the object turns about another point).
 
 Input that cannot work is refused before planning with an :class:`InputError` naming the
 field: a hand with fewer than three fingertips, an object wider at its narrowest than the
@@ -16,7 +21,7 @@ not join within their budget).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from time import perf_counter
 
@@ -24,12 +29,13 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from regrasp_cli.artefacts import Builder, QuietBuilder, rebuild_notice
-from regrasp_cli.config import InhandSpec, ObstacleSpec, load_inhand_spec
+from regrasp_cli.config import InhandPlanning, ObstacleSpec, load_inhand_spec
 from regrasp_cli.dexterous.gait import GaitOptions, Piece, Regrasp
 from regrasp_cli.dexterous.gsn import GsConfig, GsOptions, GsScratch
 from regrasp_cli.dexterous.multiquery import GsRoadmap, LearnOptions, LearnStats, from_arrays, learn, query, \
     to_arrays
 from regrasp_cli.dexterous.hand import reach, tip_targets
+from regrasp_cli.dexterous.motions import piece_motions
 from regrasp_cli.dexterous.roadmap import GaitTreeOptions, grow, grow_connect, start_config, tree_budgets
 from regrasp_cli.dexterous.smooth import smooth
 from regrasp_cli.dexterous.surface import MeshSurface
@@ -37,38 +43,31 @@ from regrasp_cli.errors import InputError, StaleArtefactError
 from regrasp_cli.grasp.single import HandModel
 from regrasp_cli.grasp.surface import build_surface
 from regrasp_cli.grasp.workspace import hand_workspace
+from regrasp_cli.manip.context import OnlineOptions
+from regrasp_cli.manip.solve import Outcome, time_steps
 from regrasp_cli.manip.status import PlanningFailed, Stage
+from regrasp_cli.manip.steps import turn
 from regrasp_cli.model.collision import CollisionOptions, ObjectPlacement, collision_world
-from regrasp_cli.model.objects import ObjectMesh, mesh_sha256
+from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.model.robot import Kinematics, Robot, load_robot
-from regrasp_cli.model.selfcollision import DisabledPairs, disabled_pairs
-from regrasp_cli.scene import scene_object
+from regrasp_cli.model.selfcollision import disabled_pairs
+from regrasp_cli.scene import Problem, scene_object
 from regrasp_cli.store import Provenance, artefact_lock, read_artefact, robot_identity, sha256_params, write_artefact
 
-CONTACT_TOLERANCE = 0.002  # m: fingertip-object penetration allowed at a contact (as the grasp search)
+CONTACT_TOLERANCE = InhandPlanning.contact_tolerance  # m: fingertip-object penetration allowed at a contact
+PLANNER = "gsn-tree"  # the plan's ``planner``: seed 003's trees in GS_n
 # options a query reads and the learning does not (the learning sets its own budget and aim
 # for each join): changing them must not make a user learn the roadmap again
 QUERY_ONLY = {"learn": ("query_expansions", "shortcuts"),
               "roadmap": ("nodes", "goal_bias", "start_samples", "first_tree", "goal_tree")}
 GOAL_PROBES = 40  # RLG samples at the goal pose before it is called unreachable
-ROADMAP_FORMAT, ROADMAP_VERSION = "regrasp.inhand-roadmap", 1
+ROADMAP_FORMAT, ROADMAP_VERSION = "regrasp.inhand-roadmap", 2  # 2: obstacles keyed in W
 
 
-@dataclass(frozen=True)
-class InhandProblem:
-    spec: InhandSpec
-    robot: Robot
-    object: ObjectMesh
-    disabled: DisabledPairs
-    q_fixed: np.ndarray  # (nq,) the robot holding the wrist, the hand open
-    obstacles: tuple[ObstacleSpec, ...] = ()  # the scene's, posed in W
-
-    @property
-    def hand(self) -> str:
-        return self.spec.hand
-
-
-def load_inhand_problem(path: str | Path, cache_dir: Path | None) -> InhandProblem:
+def load_inhand_problem(path: str | Path, cache_dir: Path | None) -> Problem:
+    """The in-hand scene at ``path`` as a :class:`~regrasp_cli.scene.Problem`: the robot
+    at the scene's ``robot_config`` with the hand open (``q_start`` and ``q_goal``, the arm
+    holds still), the obstacles posed in W."""
     spec = load_inhand_spec(path)
     robot = load_robot(spec.robot)
     if spec.hand not in robot.hands:
@@ -88,23 +87,15 @@ def load_inhand_problem(path: str | Path, cache_dir: Path | None) -> InhandProbl
             raise InputError(spec.file, exc.field, exc.message) from None
     q[h.idx] = h.open
     X_WG = Kinematics(robot).fk(q, h.grasp_frame)
-    obstacles = tuple(replace(o, X_WO=X_WG @ o.X_WO) for o in spec.obstacles)
-    return InhandProblem(spec, robot, obj, disabled_pairs(robot, cache_dir), q, obstacles)
+    spec = replace(spec, obstacles=tuple(replace(o, X_WO=X_WG @ o.X_WO) for o in spec.obstacles))
+    return Problem(spec, robot, obj, disabled_pairs(robot, cache_dir), q, q.copy(),
+                   None if cache_dir is None else Path(cache_dir))
 
 
-@dataclass
-class InhandOutcome:
-    pieces: list[Piece] = field(default_factory=list)
-    start: GsConfig | None = None
-    X_WG: np.ndarray = field(default_factory=lambda: np.eye(4))
-    failure: PlanningFailed | None = None
-    stats: dict = field(default_factory=dict)
-
-
-def scratch(problem: InhandProblem, cache_dir: Path | None, rng: np.random.Generator) -> GsScratch:
+def scratch(problem: Problem, rng: np.random.Generator) -> GsScratch:
     """What the planner checks GS_n with (:func:`gs_scratch`) for the in-hand scene's problem."""
-    return gs_scratch(problem.robot, problem.hand, problem.object.mesh, problem.disabled.links(), problem.q_fixed,
-                      problem.obstacles, problem.spec.object.friction, cache_dir, rng)
+    return gs_scratch(problem.robot, problem.spec.hand, problem.object.mesh, problem.disabled.links(),
+                      problem.q_start, problem.spec.obstacles, problem.spec.object.friction, problem.cache_dir, rng)
 
 
 def gs_scratch(robot: Robot, hand: str, mesh, disabled_links, q_fixed: np.ndarray, obstacles: tuple[ObstacleSpec, ...],
@@ -142,7 +133,7 @@ def turn_in_hand(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.G
     return smooth(s, pieces, rng, gait)
 
 
-def _check_size(problem: InhandProblem, s: GsScratch) -> None:
+def _check_size(problem: Problem, s: GsScratch) -> None:
     """The object must fit between the fingertips: its narrowest extent (over the
     principal axes of its hull) no wider than the farthest two fingertips can be apart."""
     tips = [w.samples[ConvexHull(w.samples).vertices] for w in s.workspaces]  # the farthest are on the hulls
@@ -152,10 +143,10 @@ def _check_size(problem: InhandProblem, s: GsScratch) -> None:
     if narrowest > span:
         raise InputError(problem.spec.file, "object.mesh",
                          f"{problem.object.name} is {narrowest:.3f} m across at its narrowest, wider than the "
-                         f"{problem.hand} hand's fingertips can open ({span:.3f} m apart at most)")
+                         f"{problem.spec.hand} hand's fingertips can open ({span:.3f} m apart at most)")
 
 
-def _check_reach(problem: InhandProblem, s: GsScratch) -> None:
+def _check_reach(problem: Problem, s: GsScratch) -> None:
     """The object must be where the fingertips reach, at its start and at its goal: some
     fingertip workspace sample (G) within ``rho`` (the object's radius about its mass
     centre) and the fingertip's radius of that centre.
@@ -171,17 +162,17 @@ def _check_reach(problem: InhandProblem, s: GsScratch) -> None:
             own = field == "object_start" or not np.allclose(X_GO[:3, 3], spec.X_GO_start[:3, 3])
             raise InputError(spec.file, field if own else "object_start",
                              f"the object's centre at [{', '.join(f'{v:.3g}' for v in c)}] m (grasp frame) is "
-                             f"{gap:.3g} m beyond the reach of every fingertip of the {problem.hand} hand")
+                             f"{gap:.3g} m beyond the reach of every fingertip of the {problem.spec.hand} hand")
 
 
-def given_start(problem: InhandProblem, s: GsScratch, rng: np.random.Generator) -> GsConfig:
+def given_start(problem: Problem, s: GsScratch, rng: np.random.Generator) -> GsConfig:
     """The scene's start grasp: each finger's contact the surface point nearest the one
     given, the fingers by IK; InputError when it cannot be, or is not force closure."""
-    spec, h = problem.spec, problem.robot.hands[problem.hand]
+    spec, h = problem.spec, problem.robot.hands[problem.spec.hand]
     names = [f.name for f in h.spec.fingers]
     given = dict(spec.start_grasp)
     if set(given) != set(names):
-        raise InputError(spec.file, "start_grasp", f"expected a contact for each finger of the {problem.hand} hand "
+        raise InputError(spec.file, "start_grasp", f"expected a contact for each finger of the {problem.spec.hand} hand "
                                                    f"({', '.join(names)}), found {', '.join(given) or 'none'}")
     tri, uv = s.surface.locate(np.array([given[n] for n in names], float))
     p, n = s.surface.points(tri, uv), s.surface.normals[tri]
@@ -199,31 +190,29 @@ def given_start(problem: InhandProblem, s: GsScratch, rng: np.random.Generator) 
     return GsConfig(spec.X_GO_start.copy(), p, n, q)
 
 
-def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int,
-                progress: Callable[[int, int], None] | None = None, builder: Builder | None = None) -> InhandOutcome:
-    """Plan the reorientation; the outcome's pieces bring the object to the goal pose, or
+def plan_inhand(problem: Problem, seed: int, progress: Callable[[int, int], None] | None = None,
+                builder: Builder | None = None) -> Outcome:
+    """Plan the reorientation: the outcome's steps bring the object to the goal pose, or
     its failure names the stage.  ``progress(done, budget)`` is called after each
     single-query expansion; ``builder`` is told why a cached roadmap is learned again."""
     spec, o = problem.spec, problem.spec.planning
     rng = np.random.default_rng(seed)
     t0 = perf_counter()
-    s = scratch(problem, cache_dir, rng)
+    s = scratch(problem, rng)
     _check_size(problem, s)
     _check_reach(problem, s)
     options = GaitTreeOptions(step_rad=o.step_rad, nodes=o.nodes)
-    out = InhandOutcome(X_WG=s.X_WG)
-    stages = {"setup": perf_counter() - t0}
+    stages, counts = {"setup": perf_counter() - t0}, {}
     t = perf_counter()
     given = given_start(problem, s, rng) if spec.start_grasp else None
     goal = goal_config(problem, s, rng, options)
     start = given or start_config(s, spec.X_GO_start, rng, options)
     stages["start grasp"] = perf_counter() - t
     if start is None:
-        out.failure = PlanningFailed(Stage.GRASPS, f"no force-closure grasp of the object at its start pose in "
-                                                   f"{options.start_samples} samples")
-        return _finish(out, s, stages, t0)
+        return _outcome(problem, s, [], stages, counts, PlanningFailed(
+            Stage.GRASPS, f"no force-closure grasp of the object at its start pose in {options.start_samples} samples"))
     if o.mode == "multi-query":
-        return _plan_multi_query(problem, s, cache_dir, start, goal, rng, options, out, stages, t0, builder)
+        return _plan_multi_query(problem, s, start, goal, rng, options, stages, builder)
     t = perf_counter()
     pieces, iterations, kept = None, 0, 0
     tick = None if progress is None else _ticker(progress, options.nodes)
@@ -231,7 +220,6 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int,
         if k:  # fresh trees from fresh start and goal grasps
             start = given or start_config(s, spec.X_GO_start, rng, options) or start
             goal = start_config(s, spec.X_GO_goal, rng, replace(options, start_samples=GOAL_PROBES)) or goal
-        out.start = start
         budgeted, gait = replace(options, nodes=budget), GaitOptions(gait_m=o.gait_m)
         if options.goal_tree:
             pieces, _, st = grow_connect(s, start, goal, rng, budgeted, gait, tick)
@@ -241,13 +229,13 @@ def plan_inhand(problem: InhandProblem, cache_dir: Path | None, seed: int,
         if pieces is not None:
             break
     stages["roadmap"] = perf_counter() - t
-    out.stats.update(nodes_kept=st.kept, iterations=iterations, trees=k + 1, start_liftable=st.start_liftable)
+    counts.update(nodes_kept=st.kept, iterations=iterations, trees=k + 1, start_liftable=st.start_liftable)
     if pieces is None:
         what = "the start and goal trees did not join" if options.goal_tree else "the tree did not reach the goal pose"
-        out.failure = PlanningFailed(Stage.ROADMAP, f"{what} in GS_n in {iterations} expansions ({k + 1} "
-                                                    f"{'pairs of trees' if options.goal_tree else 'trees'}, {kept} nodes)")
-        return _finish(out, s, stages, t0)
-    return _smoothed(problem, s, pieces, rng, out, stages, t0)
+        return _outcome(problem, s, [], stages, counts, PlanningFailed(
+            Stage.ROADMAP, f"{what} in GS_n in {iterations} expansions ({k + 1} "
+                           f"{'pairs of trees' if options.goal_tree else 'trees'}, {kept} nodes)"))
+    return _smoothed(problem, s, pieces, rng, stages, counts)
 
 
 def _ticker(progress: Callable[[int, int], None], budget: int) -> Callable[[], None]:
@@ -261,41 +249,55 @@ def _ticker(progress: Callable[[int, int], None], budget: int) -> Callable[[], N
     return tick
 
 
-def _smoothed(problem: InhandProblem, s: GsScratch, pieces: list[Piece], rng: np.random.Generator,
-              out: InhandOutcome, stages: dict, t0: float) -> InhandOutcome:
+def _smoothed(problem: Problem, s: GsScratch, pieces: list[Piece], rng: np.random.Generator, stages: dict,
+              counts: dict) -> Outcome:
     o = problem.spec.planning
-    out.stats.update(regrasps_unsmoothed=sum(isinstance(p, Regrasp) for p in pieces),
-                     transfers_unsmoothed=sum(not isinstance(p, Regrasp) for p in pieces))
+    counts.update(finger_regrasps_unsmoothed=sum(isinstance(p, Regrasp) for p in pieces),
+                  transfers_unsmoothed=sum(not isinstance(p, Regrasp) for p in pieces))
     if o.smooth:
         t = perf_counter()
         pieces = smooth(s, pieces, rng, GaitOptions(gait_m=o.gait_m))
         stages["smoothing"] = perf_counter() - t
-    out.pieces = pieces
-    return _finish(out, s, stages, t0)
+    return _outcome(problem, s, pieces, stages, counts)
 
 
-def _plan_multi_query(problem: InhandProblem, s: GsScratch, cache_dir: Path | None, start: GsConfig,
-                      goal: GsConfig, rng: np.random.Generator, options: GaitTreeOptions, out: InhandOutcome,
-                      stages: dict, t0: float, builder: Builder | None) -> InhandOutcome:
+def _plan_multi_query(problem: Problem, s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.Generator,
+                      options: GaitTreeOptions, stages: dict, builder: Builder | None) -> Outcome:
     """§V's multi-query version: the learned roadmap (built first when missing), the start
     and goal grasps joined to it, the path over it."""
     t = perf_counter()
-    rm, _, built = inhand_roadmap(problem, cache_dir, builder=builder)
+    rm, _, built = inhand_roadmap(problem, builder=builder)
     stages["roadmap learning" if built else "roadmap loading"] = perf_counter() - t
     t = perf_counter()
     gait = GaitOptions(gait_m=problem.spec.planning.gait_m)
     pieces, st, why = query(s, rm, start, goal, rng, LearnOptions(), options, gait)
     stages["roadmap"] = perf_counter() - t
-    out.start = start
-    out.stats.update(nodes_kept=st.kept, iterations=st.iterations, trees=2, start_liftable=st.start_liftable,
-                     roadmap_nodes=len(rm.nodes))
+    counts = dict(nodes_kept=st.kept, iterations=st.iterations, trees=2, start_liftable=st.start_liftable,
+                  roadmap_nodes=len(rm.nodes))
     if pieces is None:
-        out.failure = PlanningFailed(Stage.ROADMAP, f"multi-query: {why} ({len(rm.nodes)} roadmap nodes)")
-        return _finish(out, s, stages, t0)
-    return _smoothed(problem, s, pieces, rng, out, stages, t0)
+        return _outcome(problem, s, [], stages, counts,
+                        PlanningFailed(Stage.ROADMAP, f"multi-query: {why} ({len(rm.nodes)} roadmap nodes)"))
+    return _smoothed(problem, s, pieces, rng, stages, counts)
 
 
-def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: GaitTreeOptions, g: GaitOptions) -> Provenance:
+def _outcome(problem: Problem, s: GsScratch, pieces: list[Piece], stages: dict, counts: dict,
+             failure: PlanningFailed | None = None) -> Outcome:
+    """The outcome of the turn ``pieces``: one step per transfer and finger regrasp, timed
+    stop to stop with the robot's velocity limits and the plans' acceleration; the
+    ``start`` and ``goal`` placements are the object's poses in W (it never rests)."""
+    robot, spec = problem.robot, problem.spec
+    names = [f.name for f in robot.hands[spec.hand].spec.fingers]
+    steps = turn(spec.hand, piece_motions(pieces, names, s.X_WG))
+    phases = time_steps(steps, {}, robot.velocity, np.full(robot.nq, OnlineOptions.acceleration))
+    gaits = sum(isinstance(p, Regrasp) for p in pieces)
+    counts = {**counts, "nodes_generated": s.generated, "finger_regrasps": gaits, "transfers": len(pieces) - gaits,
+              "collision_checks": s.checks, "gs_failures": dict(s.failures)}
+    return Outcome("inhand", () if failure else phases,
+                   placements={"start": s.X_WG @ spec.X_GO_start, "goal": s.X_WG @ spec.X_GO_goal},
+                   stages=stages, counts=counts, failure=failure)
+
+
+def roadmap_provenance(problem: Problem, o: LearnOptions, r: GaitTreeOptions, g: GaitOptions) -> Provenance:
     """What a learned roadmap depends on: the robot, the object's geometry, the hand's
     posture, the friction, where the object is held, the obstacles and the options the
     learning reads (not a query's own: ``QUERY_ONLY``)."""
@@ -303,7 +305,7 @@ def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: GaitTreeOptio
     plain = lambda a: (np.round(a, 9) + 0.0).tolist()  # noqa: E731 - -0.0 and 0.0 are one key
     learning = {k: v for k, v in asdict(o).items() if k not in QUERY_ONLY["learn"]}
     roadmap = {k: v for k, v in asdict(r).items() if k not in QUERY_ONLY["roadmap"]}
-    params = {"hand": problem.hand, "q_fixed": plain(problem.q_fixed), "friction": spec.object.friction,
+    params = {"hand": problem.spec.hand, "q_fixed": plain(problem.q_start), "friction": spec.object.friction,
               "p_GO": plain(spec.X_GO_start[:3, 3]), "obstacles": [repr(x) for x in spec.obstacles],
               "learn": learning, "roadmap": roadmap, "gait": asdict(g)}
     return Provenance(ROADMAP_FORMAT, ROADMAP_VERSION, {"urdf": problem.robot.urdf_sha256,
@@ -312,15 +314,15 @@ def roadmap_provenance(problem: InhandProblem, o: LearnOptions, r: GaitTreeOptio
                                                         "params": sha256_params(params)})
 
 
-def roadmap_path(cache_dir: Path, problem: InhandProblem, prov: Provenance) -> Path:
+def roadmap_path(cache_dir: Path, problem: Problem, prov: Provenance) -> Path:
     """One file per robot, hand and inputs (the object's mesh among them: two objects'
     roadmaps must not take turns overwriting one file)."""
     return (Path(cache_dir) / "inhand-roadmap" /
-            f"{robot_identity(problem.robot)}-{problem.hand}-{sha256_params(dict(prov.inputs))[:12]}.h5")
+            f"{robot_identity(problem.robot)}-{problem.spec.hand}-{sha256_params(dict(prov.inputs))[:12]}.h5")
 
 
-def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions = LearnOptions(),
-                   progress=None, builder: Builder | None = None) -> tuple[GsRoadmap, LearnStats | None, bool]:
+def inhand_roadmap(problem: Problem, o: LearnOptions = LearnOptions(), progress=None,
+                   builder: Builder | None = None) -> tuple[GsRoadmap, LearnStats | None, bool]:
     """The learned roadmap for the problem's hand, object and placement: read from the
     cache when fresh, else learned (seeded by the options, not the query) and written;
     (roadmap, the learning's counts when it ran, whether it was built).  A stale or
@@ -331,6 +333,7 @@ def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptio
     r = replace(GaitTreeOptions(), step_rad=spec.planning.step_rad)
     g = GaitOptions(gait_m=spec.planning.gait_m)
     prov = roadmap_provenance(problem, o, r, g)
+    cache_dir = problem.cache_dir
     path = None if cache_dir is None else roadmap_path(cache_dir, problem, prov)
     if path is not None:
         with artefact_lock(path):
@@ -339,17 +342,17 @@ def inhand_roadmap(problem: InhandProblem, cache_dir: Path | None, o: LearnOptio
                     return from_arrays(read_artefact(path, prov, "regrasp inhand roadmap").data), None, False
                 except StaleArtefactError as exc:
                     (builder or QuietBuilder()).notice(rebuild_notice(path, exc))
-            rm, st = _learn(problem, cache_dir, o, r, g, progress)
+            rm, st = _learn(problem, o, r, g, progress)
             write_artefact(path, prov, to_arrays(rm), attrs={"roots": st.roots, "joined": st.joined})
             return rm, st, True
-    rm, st = _learn(problem, cache_dir, o, r, g, progress)
+    rm, st = _learn(problem, o, r, g, progress)
     return rm, st, True
 
 
-def _learn(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions, r: GaitTreeOptions, g: GaitOptions,
+def _learn(problem: Problem, o: LearnOptions, r: GaitTreeOptions, g: GaitOptions,
            progress) -> tuple[GsRoadmap, LearnStats]:
     rng = np.random.default_rng(o.seed)
-    s = scratch(problem, cache_dir, rng)
+    s = scratch(problem, rng)
     rm, st = learn(s, problem.spec.X_GO_start[:3, 3], rng, o, r, g, progress)
     if len(rm.nodes) < 2:
         raise PlanningFailed(Stage.ROADMAP, f"the roadmap learning joined none of {st.roots} grasps at random "
@@ -357,20 +360,12 @@ def _learn(problem: InhandProblem, cache_dir: Path | None, o: LearnOptions, r: G
     return rm, st
 
 
-def goal_config(problem: InhandProblem, s: GsScratch, rng: np.random.Generator, o: GaitTreeOptions) -> GsConfig:
+def goal_config(problem: Problem, s: GsScratch, rng: np.random.Generator, o: GaitTreeOptions) -> GsConfig:
     """The goal tree's root: the best of ``GOAL_PROBES`` RLG samples at the goal pose
     (:func:`roadmap.start_config`); InputError when none holds the object there."""
     spec = problem.spec
     goal = start_config(s, spec.X_GO_goal, rng, replace(o, start_samples=GOAL_PROBES))
     if goal is None:
-        raise InputError(spec.file, "object_goal", f"no grasp of the {problem.hand} hand holds the object at this "
+        raise InputError(spec.file, "object_goal", f"no grasp of the {problem.spec.hand} hand holds the object at this "
                                                    f"pose ({GOAL_PROBES} samples): the fingers cannot reach it there")
     return goal
-
-
-def _finish(out: InhandOutcome, s: GsScratch, stages: dict, t0: float) -> InhandOutcome:
-    regrasps = sum(isinstance(p, Regrasp) for p in out.pieces)
-    out.stats.update(nodes_generated=s.generated, regrasps=regrasps, transfers=len(out.pieces) - regrasps,
-                     collision_checks=s.checks, gs_failures=dict(s.failures), stages_s=stages,
-                     planning_s=perf_counter() - t0)
-    return out

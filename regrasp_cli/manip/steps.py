@@ -72,15 +72,20 @@ def handover(carry: str, place: str, a: SingleConfig, gid_a: str, ex: ExchangeCo
 
 def inhand(label: str, a: SingleConfig, gid_a: str, motions: list, b: SingleConfig, gid_b: str) -> list[Step]:
     """The hand of ``a`` lifts the object, its fingers turn it (``motions``: the
-    :class:`dexterous.record.FingerMotion` of each piece) from grasp ``gid_a`` to ``gid_b`` while the arm
+    :class:`dexterous.motions.FingerMotion` of each piece) from grasp ``gid_a`` to ``gid_b`` while the arm
     holds still, and it carries the object (query ``label``:place) down to ``b``'s
     placement (seed 003 as a move of seed 001's graph)."""
     h = a.hand
-    held_a, held_b, fingers = Mode.held(**{h: gid_a}), Mode.held(**{h: gid_b}), Mode(inhand=h)
-    out = [Step(Transition(Kind.TRANSFER, held_a, held_a, label + ":lift"), (a.lift,))]
-    for m in motions:
-        out.append(Step(Transition(m.kind, fingers, fingers, m.label, (h,)), (m.q,), m.X_WO, m.contacts))
+    held_a, held_b = Mode.held(**{h: gid_a}), Mode.held(**{h: gid_b})
+    out = [Step(Transition(Kind.TRANSFER, held_a, held_a, label + ":lift"), (a.lift,)), *turn(h, motions)]
     end = motions[-1].q[-1]
     out.append(Step(Transition(Kind.TRANSFER, held_b, held_b, label + ":place"), (end[None], label + ":place",
                                                                                b.lift[::-1])))
     return out
+
+
+def turn(hand: str, motions: list) -> list[Step]:
+    """The fingers of ``hand`` turn the object, the arm still: a step per
+    :class:`dexterous.motions.FingerMotion` (seed 003), the whole of an in-hand plan."""
+    fingers = Mode(inhand=hand)
+    return [Step(Transition(m.kind, fingers, fingers, m.label, (hand,)), (m.q,), m.X_WO, m.contacts) for m in motions]

@@ -78,19 +78,19 @@ def _scene(tmp_path, **planning):
 
 
 def test_the_cached_roadmap_is_reused_and_rebuilt_when_its_bytes_change(tmp_path, cache_dir):
-    problem = load_inhand_problem(_scene(tmp_path), cache_dir)
     cache = tmp_path / "cache"
+    problem = replace(load_inhand_problem(_scene(tmp_path), cache_dir), cache_dir=cache)  # its own roadmap folder
     opts = LearnOptions(roots=2)
-    rm, _, built = inhand_roadmap(problem, cache, opts)
+    rm, _, built = inhand_roadmap(problem, opts)
     assert built
-    again, _, built = inhand_roadmap(problem, cache, opts)
+    again, _, built = inhand_roadmap(problem, opts)
     assert not built and len(again.nodes) == len(rm.nodes)
     r = replace(GaitTreeOptions(), step_rad=problem.spec.planning.step_rad)
     g = GaitOptions(gait_m=problem.spec.planning.gait_m)
     path = roadmap_path(cache, problem, roadmap_provenance(problem, opts, r, g))
     with h5py.File(path, "r+") as f:
         f["nodes/q"][0, 0] += 0.1  # one joint value changed on disk
-    _, _, built = inhand_roadmap(problem, cache, opts)
+    _, _, built = inhand_roadmap(problem, opts)
     assert built  # refused as damaged and learned again, not read
 
 

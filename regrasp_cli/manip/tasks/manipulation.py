@@ -46,7 +46,7 @@ from regrasp_cli.manip import steps as moves
 from regrasp_cli.manip.context import OnlineOptions, Scratch
 from regrasp_cli.manip.doublegrasp import DoubleGrasp, cheap_order, empty_list_reason, single_configurations, workable
 from regrasp_cli.dexterous.gsn import GsConfig
-from regrasp_cli.dexterous.record import piece_motions
+from regrasp_cli.dexterous.motions import piece_motions
 from regrasp_cli.dexterous.roadmap import GaitTreeOptions
 from regrasp_cli.dexterous.task import gs_scratch, turn_in_hand
 from regrasp_cli.manip.graph import GOAL, START, STYLES, Edge, EdgeKind, Node, fewest_regrasps, optimise, ruled_out, \
@@ -108,7 +108,7 @@ class _Graph:
         self.blocked: set[Edge] = set()
         self.why: dict[Edge, str] = {}
         self.exchanges: dict[Edge, ExchangeConfig] = {}
-        self.inhands: dict[Edge, list[tuple]] = {}  # an in-hand edge's finger motions (dexterous.record)
+        self.inhands: dict[Edge, list[tuple]] = {}  # an in-hand edge's finger motions (dexterous.motions)
         self.gaits = frozenset(h for h in HANDS if p.robot.hands[h].kind == "fingertips"
                                and len(p.robot.hands[h].finger_idx) >= 3)  # hands that can finger-gait
         self.paths: dict[str, np.ndarray] = {}
