@@ -24,6 +24,8 @@ returns realizable paths.  Motions are not planned here: the search solves them 
 as it does for every edge.
 
 Pure: nothing here knows a robot; ``sample`` and ``valid`` (IK and collision) are given.
+The growth itself is the one of the elementary roadmaps
+(:func:`regrasp_cli.roadmap.visprm.grow_visibility`); what is ours here is the seeing.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from regrasp_cli.manip.graph import Node, type2
+from regrasp_cli.roadmap.visprm import grow_visibility
 
 
 @dataclass(frozen=True)
@@ -79,46 +82,31 @@ def visibility_roadmap(start: list[Node], goal: list[Node], sample: Callable[[],
     placement (``start``: all reached from the robot's start, so one component) and at the
     target one (``goal``); ``sample()`` draws a configuration (at a new placement, or at
     one sampled before), ``valid(node)`` says whether it exists (memoise it: corners
-    repeat)."""
-    out = VisRoadmap()
-    guards = {0: list(start), 1: [n for n in goal if n not in start]}
-    if not guards[0] or not guards[1]:
-        return out
-    failures = 0
-    while out.samples < options.samples and failures < options.max_failures:
-        q = sample()
-        out.samples += 1
-        if any(q in g for g in guards.values()) or q in out.nodes:
-            failures += 1
-            continue
-        if not valid(q):
-            out.invalid += 1
-            continue
-        seen: dict[int, tuple[Node, list[Node]]] = {}
+    repeat).  Invalid samples do not count as failures (most samples of a placement are)."""
+    goal = [n for n in goal if n not in start]
+    if not start or not goal:
+        return VisRoadmap()
+
+    def seen_by(q: Node, nodes: list[Node], guards: dict[int, list[int]]):
+        seen = {}
         for c, members in guards.items():
             tried: set[Node] = set()
-            for g in sorted(members, key=lambda g: g.hand != q.hand):  # the same hand's first: fewer corners
-                via = sees(q, g, valid, tried, options.corners)
+            for g in sorted(members, key=lambda g: nodes[g].hand != q.hand):  # the same hand's first: fewer corners
+                via = sees(q, nodes[g], valid, tried, options.corners)
                 if via is not None:
                     seen[c] = (g, via)
                     break
-        if len(seen) == 1:
-            failures += 1
-            continue
-        failures = 0
-        out.nodes.add(q)
-        if not seen:
-            out.guards.append(q)
-            guards[max(guards) + 1] = [q]
-            continue
-        out.connectors.append(q)
-        keep = min(seen)  # 0 (the initial component) absorbs; 1 disappears only into 0
-        for c, (g, via) in sorted(seen.items()):
-            out.links.append((q, g))
-            out.nodes.update(via)
-            if c != keep:
-                guards[keep] += guards.pop(c)
-        if 1 not in guards:
-            out.joined = True
-            break
-    return out
+        return seen
+
+    def known(q: Node, vis) -> bool:  # kept, or a corner a connector was joined through
+        return q in vis.nodes or any(q in via for _, _, via in vis.links)
+
+    vis = grow_visibility(sample, valid, seen_by, (list(start), goal), max_failures=options.max_failures,
+                          max_samples=options.samples, invalid_fails=False, until_joined=True, known=known)
+    given = len(start) + len(goal)
+    sampled = range(given, len(vis.nodes))
+    return VisRoadmap(guards=[vis.nodes[i] for i in sampled if vis.guard[i]],
+                      connectors=[vis.nodes[i] for i in sampled if not vis.guard[i]],
+                      nodes={vis.nodes[i] for i in sampled} | {n for _, _, via in vis.links for n in via},
+                      links=[(vis.nodes[k], vis.nodes[g]) for g, k, _ in vis.links],
+                      samples=vis.samples, invalid=vis.invalid, joined=vis.joined)

@@ -65,7 +65,7 @@ from regrasp_cli.motion.local import joint_reach, joint_weights
 from regrasp_cli.placement.stable import StablePlacement
 from regrasp_cli.placement.supports import FitOptions, Fitted, fit_placements, scene_supports
 from regrasp_cli.scene import Problem
-from regrasp_cli.spatial import inverse
+from regrasp_cli.spatial import inverse, rotation_angle
 
 TASK = "manipulation graph"
 STAGES = ("nodes", "search", "motions", "optimise", "timing")
@@ -87,6 +87,9 @@ class GraphOptions:
     fit: FitOptions = field(default_factory=FitOptions)
     inhand_nodes: int = 2000  # GS_n expansions an in-hand regrasp may take (seed 003's two trees) ...
     inhand_attempts: int = 2  # ... and in-hand edges tried per run: each failure costs seconds
+    turn_cost: float = 20.0  # weighted joint distance one radian of an in-hand turn counts as: finger gaiting
+    # turns the object about this many times slower than the arm moves (docs/DESIGN-NOTES.md), so that among
+    # in-hand moves the search tries the smallest turns first, as their motion is the shortest
 
 
 class _Graph:
@@ -369,11 +372,18 @@ class _Graph:
         return bool(touching[a.grasp].all() and touching[b.grasp].all())
 
     def length(self, e: Edge) -> float:
-        """Weighted joint distance the edge's motion covers at least (its queries' ends)."""
+        """Weighted joint distance the edge's motion covers at least (its queries' ends);
+        an in-hand edge's counts its turn too (``turn_cost`` per radian)."""
         q = self.scratch.problem
         a = q.q_start if e.a is None else self.configs[e.a].lift[-1]
         b = q.q_goal if e.b is None else self.configs[e.b].lift[-1]
-        return float(np.linalg.norm((a - b) * self.weights))
+        arm = float(np.linalg.norm((a - b) * self.weights))
+        return arm + self.options.turn_cost * self.turn_angle(e.a, e.b) if e.kind == EdgeKind.INHAND else arm
+
+    def turn_angle(self, a: Node, b: Node) -> float:
+        """The angle (rad) the object turns in the hand from ``a``'s grasp to ``b``'s."""
+        X = self.lists[a.hand].X_OG
+        return rotation_angle(X[a.grasp, :3, :3].T @ X[b.grasp, :3, :3])
 
     # ---------------------------------------------------------------- motions of edges
 
