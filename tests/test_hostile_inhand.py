@@ -198,3 +198,36 @@ def test_an_object_start_out_of_reach_is_blamed_on_object_start(tmp_path, cache_
     result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "plan.json")
     assert_one_error_line(result, str(scene), *words)
     assert not (tmp_path / "plan.json").exists()
+
+
+# ------------------------------------------------------------------ what the GS_n checks leave out
+
+
+def test_a_palm_inside_an_obstacle_is_refused_naming_robot_config(tmp_path, cache_dir):
+    """The GS_n checks see only what moves while the wrist is held (the fingers and the
+    object against the rest): a palm already inside an obstacle is refused before
+    planning, naming ``robot_config``, not planned around."""
+    import yaml
+
+    from regrasp_cli.dexterous.task import finger_links, still_collisions
+    from regrasp_cli.model.handshape import palm_and_finger_links
+    from regrasp_cli.model.robot import Kinematics
+
+    humanoid = ROOT / "regrasp_cli" / "data" / "scenes" / "inhand_humanoid_ball.yaml"  # a palm on an arm
+    problem = load_inhand_problem(humanoid, cache_dir)
+    robot, hand, kin = problem.robot, problem.spec.hand, Kinematics(problem.robot)
+    palm = sorted(palm_and_finger_links(robot, hand) - finger_links(robot, hand))[0]  # the wrist's link
+    X_WG = kin.fk(problem.q_start, robot.hands[hand].grasp_frame)
+    p_GP = np.linalg.solve(X_WG, kin.fk(problem.q_start, robot.model.getFrameId(palm)) @ [0, 0, 0, 1])[:3]
+    d = yaml.safe_load(humanoid.read_text())
+    d["obstacles"] = [{"name": "post", "box": {"size": [0.02, 0.02, 0.02]},
+                       "pose": {"xyz": [float(x) for x in p_GP]}}]
+    scene = tmp_path / "scene.yaml"
+    scene.write_text(yaml.safe_dump(d))
+    moved = load_inhand_problem(scene, cache_dir)
+    pairs = still_collisions(robot, hand, moved.disabled.links(), moved.q_start, moved.spec.obstacles)
+    assert pairs and all("obstacle:post" in p for p in pairs)
+    assert not still_collisions(robot, hand, problem.disabled.links(), problem.q_start, problem.spec.obstacles)
+    result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "plan.json")
+    assert_one_error_line(result, str(scene), ": robot_config: ", "in collision")
+    assert not (tmp_path / "plan.json").exists()

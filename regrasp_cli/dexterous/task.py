@@ -48,6 +48,7 @@ from regrasp_cli.manip.solve import Outcome, time_steps
 from regrasp_cli.manip.status import PlanningFailed, Stage
 from regrasp_cli.manip.steps import turn
 from regrasp_cli.model.collision import CollisionOptions, ObjectPlacement, collision_world
+from regrasp_cli.model.handshape import palm_and_finger_links
 from regrasp_cli.model.objects import mesh_sha256
 from regrasp_cli.model.robot import Kinematics, Robot, load_robot
 from regrasp_cli.model.selfcollision import disabled_pairs
@@ -105,7 +106,10 @@ def gs_scratch(robot: Robot, hand: str, mesh, disabled_links, q_fixed: np.ndarra
     ``q_fixed`` (nq,), the wrist held there), the fingers' workspaces, the surface sampled
     every half fingertip radius, the triangulated one; ``obstacles`` posed in W;
     ``tolerance`` (m) the fingertip-object penetration a contact may have (the one the
-    plan records, which the validator checks with)."""
+    plan records, which the validator checks with).  The world checks only the pairs of a
+    finger or the object with an obstacle or a link of the robot outside the hand: nothing
+    else moves while the wrist is held (:func:`still_collisions` is the rest, checked once),
+    and the hand model checks the hand against itself and the object."""
     hm = HandModel(robot, hand, mesh, disabled_links, tolerance)
     hm.q = np.array(q_fixed, float)
     hm.X_WG = Kinematics(robot).fk(hm.q, robot.hands[hand].grasp_frame)
@@ -115,9 +119,27 @@ def gs_scratch(robot: Robot, hand: str, mesh, disabled_links, q_fixed: np.ndarra
     rho = float(np.linalg.norm(mesh.vertices - sampled.mass_centre, axis=1).max())
     world = None
     if obstacles:  # checked as the validator does, with the object touched by this hand only
+        moving, inside = finger_links(robot, hand) | {"object"}, palm_and_finger_links(robot, hand) | {"object"}
         world = collision_world(robot, obstacles, disabled_links, ObjectPlacement(mesh, hm.X_WG, None, (hand,)),
-                                CollisionOptions(tolerance, tolerance))
+                                CollisionOptions(tolerance, tolerance),
+                                pair_filter=lambda a, b: bool({a, b} & moving) and not {a, b} <= inside)
     return GsScratch(hm, ws, sampled, MeshSurface.of(mesh), rho, GsOptions(friction=friction), world=world)
+
+
+def finger_links(robot: Robot, hand: str) -> set[str]:
+    """The links that move with ``hand``'s fingers (not its palm)."""
+    joints = set(robot.hand_joints(hand))
+    return {robot.model.frames[go.parentFrame].name for go in robot.collision_model.geometryObjects
+            if go.parentJoint in joints}
+
+
+def still_collisions(robot: Robot, hand: str, disabled_links, q_fixed: np.ndarray,
+                     obstacles: tuple[ObstacleSpec, ...]) -> list[tuple[str, str]]:
+    """The pairs in collision at ``q_fixed`` (nq,) that no finger of ``hand`` is in: what
+    the GS_n checks of :func:`gs_scratch` leave out, as nothing there moves."""
+    moving = finger_links(robot, hand)
+    world = collision_world(robot, obstacles, disabled_links, pair_filter=lambda a, b: not ({a, b} & moving))
+    return world.colliding_pairs(q_fixed)
 
 
 def turn_in_hand(s: GsScratch, start: GsConfig, goal: GsConfig, rng: np.random.Generator,
@@ -144,6 +166,16 @@ def _check_size(problem: Problem, s: GsScratch) -> None:
         raise InputError(problem.spec.file, "object.mesh",
                          f"{problem.object.name} is {narrowest:.3f} m across at its narrowest, wider than the "
                          f"{problem.spec.hand} hand's fingertips can open ({span:.3f} m apart at most)")
+
+
+def _check_still(problem: Problem) -> None:
+    """The robot holding the wrist at ``robot_config`` must be free but for its fingers
+    (the GS_n checks see only what moves)."""
+    spec = problem.spec
+    pairs = still_collisions(problem.robot, spec.hand, problem.disabled.links(), problem.q_start, spec.obstacles)
+    if pairs:
+        raise InputError(spec.file, "robot_config", f"the robot holding the wrist there is in collision, its fingers "
+                                                    f"aside ({', '.join('-'.join(p) for p in pairs[:3])})")
 
 
 def _check_reach(problem: Problem, s: GsScratch) -> None:
@@ -201,6 +233,7 @@ def plan_inhand(problem: Problem, seed: int, progress: Callable[[int, int], None
     s = scratch(problem, rng)
     _check_size(problem, s)
     _check_reach(problem, s)
+    _check_still(problem)
     options = GaitTreeOptions(step_rad=o.step_rad, nodes=o.nodes)
     stages, counts = {"setup": perf_counter() - t0}, {}
     t = perf_counter()
