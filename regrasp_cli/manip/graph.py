@@ -76,7 +76,7 @@ class Style:
     """Which edges a manipulation may use (``--style``): ``one-arm`` picks and places with
     one hand; ``handover`` adds hand-overs in the air; ``inhand`` turns the object in the
     hand's fingers; ``place-regrasp`` puts the object down at intermediate placements and
-    grasps it again; ``auto`` all of them but ``inhand`` (not yet: see
+    grasps it again; ``auto`` all of them (tried one style at a time, in the order of
     :data:`manip.tasks.manipulation.LEVELS`)."""
 
     name: str
@@ -85,8 +85,8 @@ class Style:
     inhand: bool = False
 
 
-# auto does not turn the object in the hand yet (manip.tasks.manipulation.LEVELS says why)
-STYLES = {s.name: s for s in (Style("auto", True, True), Style("one-arm", False, False),
+# auto turns the object in the hand last (manip.tasks.manipulation.LEVELS says why)
+STYLES = {s.name: s for s in (Style("auto", True, True, True), Style("one-arm", False, False),
                                Style("handover", True, False), Style("inhand", False, False, True),
                                Style("place-regrasp", False, True))}
 

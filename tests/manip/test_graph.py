@@ -70,7 +70,7 @@ def test_the_in_hand_regrasp_when_it_is_the_only_way():
     assert style_of(path) == "inhand" and sum(e.kind.regrasps for e in path) == 1
     assert fewest_regrasps(nodes, successors(nodes, ANY, _always, _always), lambda e: True) == 1
     assert search(successors(nodes, ANY, _always), lambda e: 1.0) is None  # no finger gaiting
-    assert search(successors(nodes, STYLES["auto"], _always, _always), lambda e: 1.0) is None  # not in auto yet
+    assert style_of(search(successors(nodes, STYLES["auto"], _always, _always), lambda e: 1.0)) == "inhand"
     assert search(successors(nodes, STYLES["one-arm"], _always, _always), lambda e: 1.0) is None
     forced = search(successors(nodes, STYLES["inhand"], _always, _always), lambda e: 1.0)
     assert _kinds(forced) == ["arrive", "inhand", "leave"]

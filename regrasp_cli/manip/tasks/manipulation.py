@@ -85,7 +85,7 @@ class GraphOptions:
     vis_pool: int = 200  # fits nearest a hand's rest its Visibility-PRM samples from
     vis_rounds: int = 2  # Visibility-PRMs at most, each when every path through the last ones failed
     fit: FitOptions = field(default_factory=FitOptions)
-    inhand_nodes: int = 2000  # GS_n expansions an in-hand regrasp may take (seed 003's two trees) ...
+    inhand_nodes: int = 4000  # GS_n expansions an in-hand regrasp may take (seed 003's two trees) ...
     inhand_attempts: int = 2  # ... and in-hand edges tried per run: each failure costs seconds
     turn_cost: float = 20.0  # weighted joint distance one radian of an in-hand turn counts as: finger gaiting
     # turns the object about this many times slower than the arm moves (docs/DESIGN-NOTES.md), so that among
@@ -404,7 +404,7 @@ class _Graph:
         if e.kind == EdgeKind.TRANSFER:
             return [Query(label, ca.lift[-1], cb.lift[-1], self._held(e.a))]
         if e.kind == EdgeKind.INHAND:
-            return [Query(label + ":place", self.inhands[e][-1].q[-1], cb.lift[-1], self._held(e.b))]
+            return [Query(label + ":place", self.turn_end(e), cb.lift[-1], self._held(e.b))]
         ex = self.exchanges[e]
         return [Query(label + ":carry", ca.lift[-1], ex.approach[0], self._held(e.a)),
                 Query(label + ":place", ex.retreat[-1], cb.lift[-1], self._held(e.b))]
@@ -432,6 +432,13 @@ class _Graph:
                 return True
         return False
 
+    def turn_end(self, e: Edge) -> np.ndarray:
+        """Where an in-hand edge's turn ends (nq,): the arm still at the end of ``e.a``'s
+        lift, the fingers at ``e.b``'s grasp (the turn ends at exactly that grasp)."""
+        q = self.configs[e.a].lift[-1].copy()
+        q[self.scratch.problem.robot.hands[e.a.hand].idx] = self.lists[e.a.hand].finger_q[e.b.grasp]
+        return q
+
     def _inhand(self, e: Edge) -> bool:
         """The finger motions of an in-hand edge (found once): the object lifted with
         ``e.a``'s grasp, the arm held at the lift's end, the fingers turning it to exactly
@@ -442,9 +449,7 @@ class _Graph:
             return False
         p, hand = self.scratch.problem, e.a.hand
         grasps, names = self.lists[hand], [f.name for f in p.robot.hands[hand].spec.fingers]
-        q_a = self.configs[e.a].lift[-1]
-        q_b = q_a.copy()
-        q_b[p.robot.hands[hand].idx] = grasps.finger_q[e.b.grasp]
+        q_a, q_b = self.configs[e.a].lift[-1], self.turn_end(e)
         rng = np.random.default_rng([self.seed, 60, len(self.why), len(self.inhands)])
         s = gs_scratch(p.robot, hand, p.object.mesh, p.disabled.links(), q_a, tuple(p.spec.obstacles),
                        p.spec.object.friction, p.cache_dir, rng, p.collision_options.contact_tolerance)
@@ -459,21 +464,14 @@ class _Graph:
 
     def solve(self, path: list[Edge], labels: list[str]) -> Edge | None:
         """Solve the motions of the path's edges not solved yet; the first edge that
-        fails (then blocked, with why), or None when all have motions."""
+        fails (then blocked, with why), or None when all have motions.  An in-hand edge's
+        fingers turn the object last, once every query of the path has a motion: the
+        turn is the dearest search, and its end is known before it (:meth:`turn_end`)."""
         for e, label in zip(path, labels):
             if e.kind == EdgeKind.HANDOVER and not self._exchange(e):
                 self.why[e] = "no reachable collision-free exchange pose for the hand-over"
                 self.blocked.add(e)
                 return e
-            if e.kind == EdgeKind.INHAND:
-                spent = self.counts["inhand_tried"] >= self.options.inhand_attempts
-                if not self._inhand(e):
-                    self.why[e] = (f"not tried: {self.options.inhand_attempts} in-hand moves a run at most, and "
-                                   "they failed" if spent else
-                                   f"the {e.a.hand} hand's fingers did not turn the object from one grasp to the "
-                                   f"other ({self.options.inhand_nodes} GS_n expansions, seed 003)")
-                    self.blocked.add(e)
-                    return e
         queries = [q for e, label in zip(path, labels) for q in self._queries(e, label) if q.label not in self.paths]
         streams = [[self.seed, 50, self.counts["queries"] + i] for i in range(len(queries))]
         self.counts["queries"] += len(queries)
@@ -493,7 +491,18 @@ class _Graph:
             if bad:
                 self.blocked.add(e)
                 self.why[e] = results[bad[0].label].error
-        return failed
+        if failed is not None:
+            return failed
+        for e in (e for e in path if e.kind == EdgeKind.INHAND):
+            spent = self.counts["inhand_tried"] >= self.options.inhand_attempts
+            if not self._inhand(e):
+                self.why[e] = (f"not tried: {self.options.inhand_attempts} in-hand moves a run at most, and "
+                               "they failed" if spent else
+                               f"the {e.a.hand} hand's fingers did not turn the object from one grasp to the "
+                               f"other ({self.options.inhand_nodes} GS_n expansions, seed 003)")
+                self.blocked.add(e)
+                return e
+        return None
 
 
 def shoulder_positions(scratch: Scratch, hand: str, most: int = 729) -> np.ndarray:
@@ -661,10 +670,13 @@ def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
                           _label(last))
 
 
-# auto does not turn the object in the hand yet: a failing in-hand search costs 15-60 s,
-# where issue 39 allows a failing style 2 s; --style inhand asks for it
-LEVELS = {"auto": ("one-arm", "handover", "place-regrasp"), "one-arm": ("one-arm",),
+# auto: by regrasps, then by expected motion time: the fingers turn the object last (finger
+# gaiting takes about TURN_S_PER_RAD seconds of motion per radian, more than a hand-over's or a
+# place-and-regrasp's whole motion in our suites; docs/DESIGN-NOTES.md), and its search is the
+# dearest (seconds to a minute), so it runs only when the arms' moves cannot do the task
+LEVELS = {"auto": ("one-arm", "handover", "place-regrasp", "inhand"), "one-arm": ("one-arm",),
           "handover": ("handover",), "inhand": ("inhand",), "place-regrasp": ("place-regrasp",)}
+TURN_S_PER_RAD = 36.0  # s of finger-gaiting motion per radian the object turns (the in-hand suite's median, 24-108)
 
 
 def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions, seed: int,
@@ -719,7 +731,10 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
             out = _graph_plan(g, stable, STYLES[name])
         clock.update({f"{name}: {k}": v for k, v in out.stages.items()})
         if out.failure is None:
-            return replace(out, stages=clock, counts=dict(out.counts, styles=dict(why, **{name: "chosen"})))
+            why[name] = "chosen"
+            for later in LEVELS[graph.style][LEVELS[graph.style].index(name) + 1:]:
+                why[later] = ruled_out(STYLES[later], usable, bool(stable), g.gaits) or _not_needed(later, name)
+            return replace(out, stages=clock, counts=dict(out.counts, styles=why))
         why[name], failed[name] = str(out.failure.reason), out.failure
         last = out
     if len(failed) == 1:
@@ -732,6 +747,14 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
 
 
 FARTHEST = (Stage.ENDS, Stage.GRASPS, Stage.KEYS, Stage.TRANSITION)  # how far a style got, in order
+
+
+def _not_needed(later: str, chosen: str) -> str:
+    """Why ``auto`` did not try ``later`` once ``chosen`` had succeeded."""
+    if later == "inhand":
+        return (f"not tried: {chosen} succeeded first; turning the object in the fingers is one regrasp too, but its "
+                f"motion is the longest (about {TURN_S_PER_RAD:g} s of finger gaiting per radian of turn)")
+    return f"not tried: {chosen} succeeded first with fewer or as few regrasps"
 
 
 def _where(f: PlanningFailed) -> str:
