@@ -26,7 +26,7 @@ from regrasp_cli.manip.queries import Roadmap
 from regrasp_cli.manip.record import make_plan
 from regrasp_cli.manip.solve import Outcome, ends_failure
 from regrasp_cli.manip.status import PlanningFailed, Stage
-from regrasp_cli.manip.tasks import handover, manipulation
+from regrasp_cli.manip.tasks import manipulation
 from regrasp_cli.model.selfcollision import PairProgress
 from regrasp_cli.placement.supports import scene_supports
 from regrasp_cli.roadmap.build import RoadmapOptions
@@ -136,7 +136,7 @@ def solve_task(loaded: Loaded, request: Request, progress: Callable[[int, int], 
 
         return plan_inhand(loaded.problem, seed_of(loaded, request), progress, builder)
     if loaded.failure is not None:
-        return handover.failed(loaded.problem, loaded.failure)
+        return manipulation.failed(loaded.problem, loaded.failure, request.style)
     return manipulation.plan_style(loaded.problem, loaded.lists, loaded.roadmap, request.options(loaded.task),
                                    seed_of(loaded, request), request.style, list(loaded.stable), keep=keep,
                                    sampler=request.sampler)

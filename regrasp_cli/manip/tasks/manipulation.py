@@ -761,6 +761,16 @@ def _where(f: PlanningFailed) -> str:
     return f.stage.value + (f" ({f.transition})" if f.transition else "")
 
 
+def failed(problem: Problem, failure: PlanningFailed, style: str) -> Outcome:
+    """The outcome of a run of ``style`` that failed before planning (its ends, an empty
+    grasp list or roadmap): no phases, the task's placements, the task that would have
+    planned it (``seed000``: the hand-over task)."""
+    if style == "seed000":
+        return handover.failed(problem, failure)
+    task = problem.spec.task
+    return Outcome(TASK, placements={START: task.X_WO_start, GOAL: task.X_WO_goal}, failure=failure)
+
+
 def plan_style(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None, options: OnlineOptions,
                seed: int, style: str, stable: list[StablePlacement] = (), keep: dict | None = None,
                sampler: str = GraphOptions.sampler) -> Outcome:
