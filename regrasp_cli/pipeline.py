@@ -20,6 +20,7 @@ from typing import Callable
 
 from regrasp_cli.artefacts import Builder, load_artefacts, placements_for_style
 from regrasp_cli.config import INHAND_FORMAT, read_yaml
+from regrasp_cli.dexterous.task import PLANNER, load_inhand_problem, plan_inhand
 from regrasp_cli.errors import EmptyGraspList, EmptyRoadmap, InputError
 from regrasp_cli.manip.context import OnlineOptions
 from regrasp_cli.manip.queries import Roadmap
@@ -56,8 +57,6 @@ class Request:
 
     def options(self, task: str) -> OnlineOptions:
         """The planner's options for ``task`` (the in-hand planner is named in the plan)."""
-        from regrasp_cli.dexterous.task import PLANNER
-
         o = OnlineOptions(planner=PLANNER if task == INHAND else self.planner, jobs=self.jobs)
         if self.iterations is not None:
             o = replace(o, rrt=replace(o.rrt, max_iterations=self.iterations))
@@ -93,8 +92,6 @@ def load_task(scene: str | Path, cache_dir: Path, request: Request, build: bool 
     ends are checked before any is built (nothing else matters if they collide).
     ``progress(done, total)``: the self-collision matrix's, the first time a robot is used."""
     if task_of(scene) == INHAND:
-        from regrasp_cli.dexterous.task import load_inhand_problem
-
         problem = load_inhand_problem(scene, cache_dir)
         if request.mode is not None:
             planning = replace(problem.spec.planning, mode=request.mode)
@@ -132,8 +129,6 @@ def solve_task(loaded: Loaded, request: Request, progress: Callable[[int, int], 
     """The loaded task solved: its outcome (``failure`` set when it failed).  ``progress``
     (done, budget) follows the in-hand search; ``keep`` receives the manipulation graph."""
     if loaded.task == INHAND:
-        from regrasp_cli.dexterous.task import plan_inhand
-
         return plan_inhand(loaded.problem, seed_of(loaded, request), progress, builder)
     if loaded.failure is not None:
         return manipulation.failed(loaded.problem, loaded.failure, request.style)
