@@ -75,3 +75,27 @@ def test_dask_without_the_extra_names_it(tmp_path, monkeypatch):
 def test_help_names_the_backends():
     r = run("bench", "--help")
     assert r.exit_code == 0 and "--backend" in r.output and "--scheduler" in r.output and "dask" in r.output
+
+
+def test_an_in_hand_suite_runs_on_a_dask_cluster_as_on_loky(tmp_path, cache_dir, cluster):
+    """Issue 42: an in-hand suite's runs are any suite's, Dask included: one goal of
+    hand4 and the ball gives the same record (times apart) and the same plan."""
+    import yaml
+
+    from regrasp_cli.validate import validate_plan
+
+    d = {"format": "regrasp.inhand-bench/1", "name": "tiny-inhand", "goals": 1,
+         "hands": [{"robot": "builtin:hand4", "label": "hand4", "objects": ["ball"]}],
+         "objects": [{"mesh": "builtin:ball", "label": "ball"}]}
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump(d))
+    out = {}
+    for backend in ("loky", "dask"):
+        out[backend] = tmp_path / backend
+        extra = ("--backend", "dask", "--scheduler", cluster.scheduler_address) if backend == "dask" else ()
+        r = run("--cache-dir", cache_dir, "bench", tmp_path / "suite.yaml", "-o", out[backend], "--jobs", "1", *extra)
+        assert r.exit_code == 0, (r.output, r.exception)
+    (on_loky,), (on_dask,) = records(out["loky"]), records(out["dask"])
+    assert on_dask["solved"] and (on_dask["hand"], on_dask["object"], on_dask["goal"]) == ("hand4", "ball", 0)
+    assert untimed(on_dask) == untimed(on_loky)
+    assert validate_plan(out["dask"] / "plans" / "hand4-ball-00.json").valid
+    assert json.loads((out["dask"] / "meta.json").read_text())["backend"] == f"dask at {cluster.scheduler_address}"
