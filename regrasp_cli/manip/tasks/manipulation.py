@@ -111,7 +111,7 @@ class _Graph:
         self.blocked: set[Edge] = set()
         self.why: dict[Edge, str] = {}
         self.exchanges: dict[Edge, ExchangeConfig] = {}
-        self.inhands: dict[Edge, list[tuple]] = {}  # an in-hand edge's finger motions (dexterous.motions)
+        self.inhands: dict[Edge, list] = {}  # an in-hand edge's finger motions (dexterous.motions.FingerMotion)
         self.gaits = frozenset(h for h in HANDS if p.robot.hands[h].kind == "fingertips"
                                and len(p.robot.hands[h].finger_idx) >= 3)  # hands that can finger-gait
         self.paths: dict[str, np.ndarray] = {}
@@ -638,6 +638,13 @@ def _intermediate(path: list[Edge]) -> set[str]:
     return {n.placement for e in path for n in (e.a, e.b) if n is not None} - {START, GOAL}
 
 
+def _ends_held(have: set[tuple[str, str]], hands) -> str:
+    """"right hand: start, left hand: neither end": the ends where each hand has a node
+    (``have``: (hand, START or GOAL) pairs)."""
+    return ", ".join(f"{h} hand: " + (" and ".join(p for p in (START, GOAL) if (h, p) in have) or "neither end")
+                     for h in hands)
+
+
 def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
     """Why no path was found: no node at the start or goal, or the last edge that failed."""
     for pid in (START, GOAL):
@@ -648,15 +655,12 @@ def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
     if style.inhand and not (style.handover or style.placements) and last is None and not tried:
         every = {(n.hand, n.placement) for n in g.configs if n.hand in g.gaits
                  and g.lists[n.hand].in_contact[n.grasp].all()}
-        ends = ", ".join(f"{h} hand: " + (" and ".join(p for p in (START, GOAL) if (h, p) in every) or "neither end")
-                         for h in sorted(g.gaits))
+        ends = _ends_held(every, sorted(g.gaits))
         return PlanningFailed(Stage.GRASPS, f"no in-hand path: finger gaiting starts and ends with every finger on the "
                                             f"object, and no hand that can gait has such a grasp at both the start "
                                             f"and the goal ({ends})")
     if not (style.handover or style.placements) and last is None and not tried:
-        have = {(n.hand, n.placement) for n in g.configs}
-        ends = ", ".join(f"{h} hand: " + (" and ".join(p for p in (START, GOAL) if (h, p) in have) or "neither end")
-                         for h in HANDS)
+        ends = _ends_held({(n.hand, n.placement) for n in g.configs}, HANDS)
         return PlanningFailed(Stage.GRASPS, f"no one-arm path: no hand holds the object at both the start and the "
                                             f"goal with one grasp ({ends})")
     if last is None and not tried:
@@ -703,11 +707,11 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
             if len(lists[h]) == 0:
                 raise PlanningFailed(Stage.GRASPS, empty_list_reason(h))
     except PlanningFailed as exc:
-        return Outcome(TASK, placements={START: task.X_WO_start, GOAL: task.X_WO_goal}, failure=exc)
+        return failed(problem, exc, graph.style)
     g = _Graph(scratch, lists, roadmap, {START: task.X_WO_start, GOAL: task.X_WO_goal}, graph, seed)
     if keep is not None:
         keep["graph"] = g
-    why, failed, clock, last = {}, {}, {}, None
+    why, failures, clock, last = {}, {}, {}, None
     t0 = time.perf_counter()
     usable = g.usable()
     tick(clock, "styles: necessary conditions", t0)
@@ -715,8 +719,8 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         cannot = ruled_out(STYLES[name], usable, bool(stable), g.gaits)
         if cannot:
             why[name] = cannot
-            failed[name] = PlanningFailed(Stage.GRASPS, cannot)
-            last = Outcome(TASK, placements=dict(g.placements), counts=dict(g.counts), failure=failed[name])
+            failures[name] = PlanningFailed(Stage.GRASPS, cannot)
+            last = Outcome(TASK, placements=dict(g.placements), counts=dict(g.counts), failure=failures[name])
             continue
         if name == "handover":
             t0 = time.perf_counter()
@@ -737,13 +741,13 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
             for later in LEVELS[graph.style][LEVELS[graph.style].index(name) + 1:]:
                 why[later] = ruled_out(STYLES[later], usable, bool(stable), g.gaits) or _not_needed(later, name)
             return replace(out, stages=clock, counts=dict(out.counts, styles=why))
-        why[name], failed[name] = str(out.failure.reason), out.failure
+        why[name], failures[name] = str(out.failure.reason), out.failure
         last = out
-    if len(failed) == 1:
+    if len(failures) == 1:
         return replace(last, stages=clock, counts=dict(last.counts, styles=why))
     # the stage of the style that got farthest; the reason names each style's stage
-    far = max(failed.values(), key=lambda f: FARTHEST.index(f.stage) if f.stage in FARTHEST else -1)
-    reason = "; ".join(f"{k} (stage {_where(f)}): {f.reason}" for k, f in failed.items())
+    far = max(failures.values(), key=lambda f: FARTHEST.index(f.stage) if f.stage in FARTHEST else -1)
+    reason = "; ".join(f"{k} (stage {_where(f)}): {f.reason}" for k, f in failures.items())
     return replace(last, stages=clock, counts=dict(last.counts, styles=why),
                    failure=PlanningFailed(far.stage, reason, far.transition))
 
