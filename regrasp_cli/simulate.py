@@ -71,6 +71,7 @@ class SimOptions:
     finger_kv: float = 0.5
     finger_armature: float = 0.005
     finger_force: float = 5.0  # N m (N): the finger actuators' bound, squeeze excluded
+    squeeze_ramp: float = 0.1  # s: a closing hand's squeeze ramps up over its closing's last this, an opening's down over the first
     coacd_threshold: float = 0.02  # coacd's concavity threshold for the object's parts
 
 
@@ -306,7 +307,6 @@ def build_world(inputs: Inputs, X_WO0: np.ndarray, opts: SimOptions, cache_dir: 
     return World(m, qpos, dof, actuated, obj, len(parts), robot_geoms)
 
 
-SQUEEZE_RAMP = 0.3  # the squeeze ramps up over this last fraction of a closing (the fingers arrive first), down over the first of an opening
 CONE_EDGES = 8  # tangent directions of the linearised friction cones of :func:`internal_forces`
 NORMAL_RATIO = 4.0  # the squeeze's largest normal part at most this times its smallest
 SHARE_STEPS = 8  # bisection steps of the squeeze's share of the friction
@@ -380,12 +380,14 @@ def _ramp(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
     return np.clip((t - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)
 
 
-def _pushes(plan: Plan, inputs: Inputs, samples: Samples,
-            force: float) -> list[list[tuple[str, str, np.ndarray, float, np.ndarray]]]:
+def _pushes(plan: Plan, inputs: Inputs, samples: Samples, force: float,
+            ramp: float) -> list[list[tuple[str, str, np.ndarray, float, np.ndarray]]]:
     """Per sample, the contacts that squeeze: (hand, finger, force on the object in O (3,)
     N, weight in [0, 1], the contact point in O (3,) m), the forces :func:`internal_forces` of the contacts held.  A
     holding hand's grasp at full weight; a hand closing on the object (touching now,
-    holding next) ramped up over the phase, one opening off it ramped down; in-hand, along
+    holding next) ramped up over the last ``ramp`` s of its closing (a squeeze that starts
+    earlier drives the fingers still in flight ahead of the plan: they arrive one by one and
+    push the object along its support), one opening off it ramped down over the first; in-hand, along
     a segment the blend (1 - s) F_a + s F_b of the internal forces of the contacts at its
     two ends (a finger leaving or arriving fades out or in, and the sum stays balanced)."""
     robot = inputs.robot
@@ -436,9 +438,9 @@ def _pushes(plan: Plan, inputs: Inputs, samples: Samples,
             if hand in p.holding:
                 continue
             if hand in after:
-                w, gid = _ramp(t, p.times[-1] - SQUEEZE_RAMP * (p.times[-1] - p.times[0]), p.times[-1]), after[hand]
+                w, gid = _ramp(t, p.times[-1] - min(ramp, p.times[-1] - p.times[0]), p.times[-1]), after[hand]
             elif hand in before:
-                w, gid = 1.0 - _ramp(t, p.times[0], p.times[0] + SQUEEZE_RAMP * (p.times[-1] - p.times[0])), before[hand]
+                w, gid = 1.0 - _ramp(t, p.times[0], p.times[0] + min(ramp, p.times[-1] - p.times[0])), before[hand]
             else:
                 continue
             for i, wi in zip(at, w):
@@ -455,7 +457,7 @@ def point_jacobian(model, data, frame: int, p_W: np.ndarray) -> np.ndarray:
     return J[:3] - pin.skew(r) @ J[3:]
 
 
-def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float) -> np.ndarray:
+def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float, ramp: float) -> np.ndarray:
     """(m, nq) joint torques (N m or N) per sample: each squeezing contact (:func:`_pushes`)
     pushes with its force (``force`` N on average) times its weight, turned into W by the
     plan's object pose, at its contact point, through its finger's joints only:
@@ -465,7 +467,7 @@ def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float) 
     model = robot.model
     data = model.createData()
     v_of = np.array([model.joints[j].idx_v for j in range(1, model.njoints)], dtype=int)
-    pushes = _pushes(plan, inputs, samples, force)
+    pushes = _pushes(plan, inputs, samples, force, ramp)
     finger_of = {(hand, x.name): f for hand, h in robot.hands.items() for f, x in enumerate(h.spec.fingers)}
     tau = np.zeros((len(samples.t), len(robot.joint_names)))
     for i, push in enumerate(pushes):
@@ -498,7 +500,7 @@ def run(plan: Plan, file: Path, inputs: Inputs, opts: SimOptions = SimOptions(),
     world = build_world(inputs, samples.X_WO[0], opts, cache_dir)
     m = world.model
     d = mujoco.MjData(m)
-    tau = squeeze_torques(plan, inputs, samples, opts.squeeze_n)
+    tau = squeeze_torques(plan, inputs, samples, opts.squeeze_n, opts.squeeze_ramp)
     fingers = np.zeros(len(inputs.robot.joint_names), dtype=bool)
     for hand in inputs.robot.hands.values():
         fingers[hand.idx] = True

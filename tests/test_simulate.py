@@ -12,7 +12,10 @@ import pytest
 
 from cli_helpers import SMALL, assert_one_error_line, run
 
-from regrasp_cli.simulate import internal_forces, point_jacobian
+from regrasp_cli.export import sample_plan
+from regrasp_cli.replay import load_inputs
+from regrasp_cli.simulate import SimOptions, internal_forces, point_jacobian, squeeze_torques
+from regrasp_cli.trajectory import read_plan
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "configs" / "scenes" / "hironx_onearm.yaml"
@@ -114,6 +117,25 @@ def test_a_jaw_pinch_with_the_plan_s_friction_holds(pinch):
     assert [p["name"] for p in report["phases"]] == [p["name"] for p in plan["phases"]]
     assert all(p["max_position"] <= 0.01 and p["max_angle"] <= 0.1 and not p["dropped"] for p in report["phases"])
     assert report["tracking_error"] < 1e-3
+
+
+def test_a_closing_hand_squeezes_only_as_its_fingers_arrive(pinch):
+    """A closing hand's squeeze is off until the last ``squeeze_ramp`` s of its closing
+    (before, it drove the fingers still in flight ahead of the plan, and they pushed the
+    humanoid's statuette 4 mm along the table), full once it holds."""
+    d = pinch[0]
+    file = d / "plan.json"
+    plan = read_plan(file)
+    inputs = load_inputs(plan, file)
+    opts = SimOptions()
+    samples = sample_plan(plan, file, inputs, 1.0 / opts.timestep)
+    tau = np.abs(squeeze_torques(plan, inputs, samples, opts.squeeze_n, opts.squeeze_ramp)).max(axis=1)
+    k = next(i for i, p in enumerate(plan.phases) if p.kind.value == "grasp")
+    closing, t_end = samples.phase == k, plan.phases[k].times[-1]
+    early = closing & (samples.t < t_end - opts.squeeze_ramp)
+    assert early.any() and tau[early].max() == 0.0
+    assert tau[closing][-1] > 0.0
+    assert np.all(tau[samples.phase == k + 1] > 0.0)  # the next phase holds it
 
 
 @pytest.mark.parametrize("share", [0.4, 4.0])
