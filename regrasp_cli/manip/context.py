@@ -79,6 +79,11 @@ class OnlineOptions:
     blend: bool = True  # cut the corners where the curve is free, and time without stopping there (motion.blend)
     prune: bool = True  # then drop the waypoints their neighbours see past: each is a stop of the motion
     acceleration: float = 3.0  # rad/s^2 for every joint (URDFs carry no acceleration limits)
+    # a held object moves at most this share of the arms' speed (velocity limits times it,
+    # accelerations times its square: the object's inertial load times its square); at full
+    # speed 3 of 20 default plans kept the statuette in MuJoCo, at half speed 18 (the fingertip
+    # grasps slip under the carry's 0.5 g and 3 rad/s, not under its weight)
+    held_speed: float = 0.5
     ik: IKOptions = IKOptions(restarts=2, max_iters=40)
 
 

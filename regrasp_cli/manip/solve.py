@@ -219,17 +219,22 @@ def timed_phase(w: np.ndarray, seg: list[str | None], velocity: np.ndarray, acce
 
 
 def time_steps(steps: list[Step], paths: dict[str, np.ndarray], velocity: np.ndarray,
-               acceleration: np.ndarray, curve_free=None) -> tuple[PhaseMotion, ...]:
+               acceleration: np.ndarray, curve_free=None, held_speed: float = 1.0) -> tuple[PhaseMotion, ...]:
     """The steps with their query labels replaced by the solved paths, timed in turn.
 
     ``curve_free(step, label, A, C, B)`` says whether the blend A, C, B (nq,) at a corner
     of ``step`` is collision-free (``label``: the query whose path holds both segments,
-    else None); without it every waypoint is a stop."""
+    else None); without it every waypoint is a stop.  A step whose transition holds the
+    object rigidly (:attr:`Transition.holding`) is timed with ``velocity`` times
+    ``held_speed`` (in (0, 1]) and ``acceleration`` times its square
+    (:attr:`OnlineOptions.held_speed`)."""
     out, clock = [], 0.0
     for step in steps:
+        slow = held_speed if step.transition.holding else 1.0
+        velocity_, acceleration_ = velocity * slow, acceleration * slow * slow
         if step.object_poses is not None:  # the fingers turn the object: a stop at every waypoint
             w = np.asarray(step.pieces[0], float)
-            times = time_parameterise(w, velocity, acceleration)
+            times = time_parameterise(w, velocity_, acceleration_)
             out.append(PhaseMotion(step.transition, w, times + clock, object_poses=step.object_poses,
                                    contacts=step.contacts))
             clock = float(times[-1]) + clock
@@ -237,7 +242,7 @@ def time_steps(steps: list[Step], paths: dict[str, np.ndarray], velocity: np.nda
         pieces = [paths[p] if isinstance(p, str) else p for p in step.pieces]
         w, seg = join(pieces, [p if isinstance(p, str) else None for p in step.pieces])
         check = (lambda label, A, C, B, st=step: curve_free(st, label, A, C, B)) if curve_free else None
-        times, radii, timing = timed_phase(w, seg, velocity, acceleration, check)
+        times, radii, timing = timed_phase(w, seg, velocity_, acceleration_, check)
         out.append(PhaseMotion(step.transition, w, times + clock, radii,
                                None if timing is None else timing.shifted(clock)))
         clock = float(times[-1]) + clock

@@ -17,7 +17,7 @@ PATH = np.array([[0.4, 0.05], [1.0, 1.0], [0.2, 1.5], [0.0, 2.0]])  # a query's 
 
 
 def _steps():
-    tr = Transition(Kind.TRANSIT, "transit", {}, (), "start")
+    tr = Transition(Kind.TRANSIT, Mode.resting("start"), Mode.resting("start"), "start")
     return [Step(tr, (LINE, "q")), Step(tr, (PATH[-1:], np.array([[0.0, 2.5]])))]
 
 
@@ -77,3 +77,17 @@ def test_an_in_hand_step_keeps_its_poses_and_contacts_on_its_waypoints():
     assert turn.object_poses is X and turn.contacts is contacts
     assert turn.times[0] == out[0].times[-1] and np.all(np.diff(turn.times) >= 0)
     assert np.allclose(np.diff(turn.times), np.diff(time_parameterise(w, np.ones(2), np.ones(2))))
+
+
+def test_a_held_object_moves_at_the_held_speed():
+    """A transfer (the object held) is timed with the velocity limits times ``held_speed``
+    and the accelerations times its square: the same path, ``1 / held_speed`` times as long,
+    stops or blends; a transit (nothing held) keeps the arms' speed."""
+    held = Mode.held(right="right-0")
+    carry = Transition(Kind.TRANSFER, held, held, "carry")
+    transit = Transition(Kind.TRANSIT, Mode.resting("start"), Mode.resting("start"), "transit")
+    for free in (None, lambda *_: True):
+        fast, slow = (time_steps([Step(carry, (LINE, "q"))], {"q": PATH}, V, A, free, k)[0] for k in (1.0, 0.5))
+        np.testing.assert_allclose(slow.times, 2.0 * fast.times, rtol=1e-6)
+        walk, = time_steps([Step(transit, (LINE, "q"))], {"q": PATH}, V, A, free, 0.5)
+        np.testing.assert_allclose(walk.times, fast.times, rtol=1e-12)

@@ -472,7 +472,7 @@ def plan(problem: Problem, lists: dict[str, GraspList], roadmap: Roadmap | None,
         counts.update(c)
         t0 = time.perf_counter()
         phases = time_steps(steps, paths, problem.robot.velocity, np.full(problem.robot.nq, options.acceleration),
-                            blend_check(scratch, queries) if options.blend else None)
+                            blend_check(scratch, queries) if options.blend else None, options.held_speed)
         tick(clock, "timing", t0)
     except PlanningFailed as exc:
         counts["checks"] = _checks(scratch, counts)

@@ -801,7 +801,7 @@ def _graph_plan(g: _Graph, stable: list[StablePlacement], style) -> Outcome:
         steps = steps_of(g, path, labels)
         queries = [q for e, label in zip(path, labels) for q in g._queries(e, label)]
         phases = time_steps(steps, g.paths, problem.robot.velocity, np.full(problem.robot.nq, options.acceleration),
-                            blend_check(scratch, queries) if options.blend else None)
+                            blend_check(scratch, queries) if options.blend else None, options.held_speed)
         tick(clock, "timing", t0)
     except PlanningFailed as exc:
         counts = dict(g.counts, checks=scratch.checks - before + _workers(g, options))
