@@ -263,16 +263,19 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
 @click.option("--style", type=click.Choice(["auto", "one-arm", "handover", "inhand", "place-regrasp", "seed000"]),
               default="auto", show_default=True,
               help="auto: the manipulation with the fewest regrasps (one arm, hand-overs, intermediate placements); "
-                   "or only one arm, only hand-overs, only turning the object in one hand's fingers (inhand, not in "
-                   "auto yet), only intermediate placements; seed000: the fixed hand-over task of Saut et al. 2010.")
+                   "or only one arm, only hand-overs, only turning the object in one hand's fingers (inhand, tried "
+                   "last by auto), only intermediate placements; seed000: the fixed hand-over task of Saut et al. 2010.")
 @click.option("--sampler", type=click.Choice(["faces", "vis-prm"]), default="faces", show_default=True,
               help="Where intermediate placements come from: one fit per resting face of the object, or a "
                    "Visibility-PRM over the hands' grasps at placements on the supports (Harada et al. 2014 §IV-B-2).")
+@click.option("--held-speed", type=float, default=None,
+              help="Share of the arms' speed at which a held object moves (velocity limits times it, accelerations "
+                   "times its square; default 0.5: fingertip grasps slip at full speed).")
 @cache_option
 @click.pass_context
 def plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, planner: str, no_build: bool, jobs: int,
          no_timings: bool, no_check: bool, roadmap_nodes: int, grasp_target: int | None, style: str,
-         sampler: str) -> None:
+         sampler: str, held_speed: float | None) -> None:
     """Plan how the robot moves the scene's object from its start to its goal pose with
     the fewest regrasps; write the plan JSON.
 
@@ -280,7 +283,7 @@ def plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, planne
     from regrasp_cli.commands.plan import run_plan
 
     run_plan(scene, ctx.obj["cache_dir"], output, seed, planner, not no_build, jobs, not no_timings, not no_check,
-             roadmap_nodes, grasp_target, style=style, sampler=sampler)
+             roadmap_nodes, grasp_target, style=style, sampler=sampler, held_speed=held_speed)
 
 
 @main.group()

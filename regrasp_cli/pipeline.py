@@ -41,8 +41,9 @@ PICK_AND_PLACE, INHAND = "pick-and-place", "inhand"
 @dataclass(frozen=True)
 class Request:
     """How to plan: the command's options, or a benchmark run's.  ``seed`` None is the
-    scene's; ``iterations`` (RRT-Connect iterations per query) and ``ompl_time`` (s) None
-    are :class:`OnlineOptions`'; ``mode`` (in-hand: single- or multi-query) None the scene's."""
+    scene's; ``iterations`` (RRT-Connect iterations per query), ``ompl_time`` (s) and
+    ``held_speed`` None are :class:`OnlineOptions`'; ``mode`` (in-hand: single- or
+    multi-query) None the scene's."""
 
     planner: str = OnlineOptions.planner
     style: str = "auto"
@@ -54,12 +55,15 @@ class Request:
     iterations: int | None = None
     ompl_time: float | None = None
     mode: str | None = None
+    held_speed: float | None = None
 
     def options(self, task: str) -> OnlineOptions:
         """The planner's options for ``task`` (the in-hand planner is named in the plan)."""
         o = OnlineOptions(planner=PLANNER if task == INHAND else self.planner, jobs=self.jobs)
         if self.iterations is not None:
             o = replace(o, rrt=replace(o.rrt, max_iterations=self.iterations))
+        if self.held_speed is not None:
+            o = replace(o, held_speed=self.held_speed)
         return o if self.ompl_time is None else replace(o, ompl_time=self.ompl_time)
 
 

@@ -277,7 +277,8 @@ def test_a_grasp_contact_at_1e308_is_one_line(default_plan):
 # ------------------------------------------------------------------ messages
 
 
-@pytest.mark.parametrize("option, value", [("--roadmap-nodes", "0"), ("--grasp-target", "-5")])
+@pytest.mark.parametrize("option, value", [("--roadmap-nodes", "0"), ("--grasp-target", "-5"), ("--held-speed", "0"),
+                                           ("--held-speed", "1.5"), ("--held-speed", "nan")])
 def test_plan_options_are_named_as_plan_spells_them(tmp_path, option, value):
     result = run("plan", SCENE_YAML, option, value, "-o", tmp_path / "p.json")
     assert_one_error_line(result, option)

@@ -57,18 +57,21 @@ def print_summary(plan: Plan, outcome: Outcome, console: Console) -> None:
 
 def run_plan(scene: Path, cache_dir: Path, out_file: Path, seed: int | None, planner: str, build: bool, jobs: int,
              timings: bool, check: bool, roadmap_nodes: int = RoadmapOptions.nodes, grasp_target: int | None = None,
-             console: Console | None = None, style: str = "auto", sampler: str = "faces") -> int:
+             console: Console | None = None, style: str = "auto", sampler: str = "faces",
+             held_speed: float | None = None) -> int:
     """The `plan` command; returns the exit code (0 solved, 1 not)."""
     console = console or Console()
     for value, name, least in ((roadmap_nodes, "--roadmap-nodes", 1), (grasp_target, "--grasp-target", 0),
                                (jobs, "--jobs", 1)):
         if value is not None and value < least:  # named as this command spells them, not as the builds do
             raise InputError(None, name, f"expected an integer >= {least}, found {value}")
+    if held_speed is not None and not 0.0 < held_speed <= 1.0:
+        raise InputError(None, "--held-speed", f"expected a number in (0, 1], found {held_speed:g}")
     check_writable(out_file, "--output", inputs=scene_inputs(scene))  # before the work, not after it
     if planner == "ompl-rrtconnect":
         ompl_version()  # InputError naming the extra before anything is loaded
     request = Request(planner=planner, style=style, seed=seed, jobs=jobs, sampler=sampler,
-                      roadmap_nodes=roadmap_nodes, grasp_target=grasp_target)
+                      roadmap_nodes=roadmap_nodes, grasp_target=grasp_target, held_speed=held_speed)
     with self_collision_bar() as progress:
         loaded = load_task(scene, cache_dir, request, build, CliBuilder(console), progress)
     run = run_task(loaded, request, out_file, check, timings)
