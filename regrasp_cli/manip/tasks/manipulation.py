@@ -677,8 +677,8 @@ def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
 
 
 # auto: by regrasps, then by expected motion time: the fingers turn the object last (finger
-# gaiting takes about TURN_S_PER_RAD seconds of motion per radian, more than a hand-over's or a
-# place-and-regrasp's whole motion in our suites; docs/DESIGN-NOTES.md), and its search is the
+# gaiting takes about TURN_S_PER_RAD seconds of motion per radian on top of the arm's moves, and
+# a hand-over's or a place-and-regrasp's whole motion in our suites at most 37 s; docs/DESIGN-NOTES.md), and its search is the
 # dearest (seconds to a minute), so it runs only when the arms' moves cannot do the task
 LEVELS = {"auto": ("one-arm", "handover", "place-regrasp", "inhand"), "one-arm": ("one-arm",),
           "handover": ("handover",), "inhand": ("inhand",), "place-regrasp": ("place-regrasp",)}
