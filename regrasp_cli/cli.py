@@ -264,13 +264,14 @@ def roadmap_show(ctx: click.Context, file: Path, scene: Path | None) -> None:
               default="auto", show_default=True,
               help="auto: the manipulation with the fewest regrasps (one arm, hand-overs, intermediate placements); "
                    "or only one arm, only hand-overs, only turning the object in one hand's fingers (inhand, tried "
-                   "last by auto), only intermediate placements; seed000: the fixed hand-over task of Saut et al. 2010.")
+                   "last by auto), only intermediate placements; seed000: the fixed hand-over task of Saut et al. "
+                   "2010.")
 @click.option("--sampler", type=click.Choice(["faces", "vis-prm"]), default="faces", show_default=True,
               help="Where intermediate placements come from: one fit per resting face of the object, or a "
                    "Visibility-PRM over the hands' grasps at placements on the supports (Harada et al. 2014 §IV-B-2).")
 @click.option("--held-speed", type=float, default=None,
-              help="Share of the arms' speed at which a held object moves (velocity limits times it, accelerations "
-                   "times its square; default 0.5: fingertip grasps slip at full speed).")
+              help="Share of the arms' speed at which a held object moves (velocity limits times it, "
+                   "accelerations times its square; default 0.5: fingertip grasps slip at full speed).")
 @cache_option
 @click.pass_context
 def plan(ctx: click.Context, scene: Path, output: Path, seed: int | None, planner: str, no_build: bool, jobs: int,

@@ -71,7 +71,8 @@ class SimOptions:
     finger_kv: float = 0.5
     finger_armature: float = 0.005
     finger_force: float = 5.0  # N m (N): the finger actuators' bound, squeeze excluded
-    squeeze_ramp: float = 0.1  # s: a closing hand's squeeze ramps up over its closing's last this, an opening's down over the first
+    squeeze_ramp: float = 0.1  # s: a closing hand's squeeze ramps up over its closing's last this,
+    # an opening hand's down over its first
     coacd_threshold: float = 0.02  # coacd's concavity threshold for the object's parts
 
 

@@ -677,9 +677,10 @@ def _no_path(g: _Graph, style, last: Edge | None) -> PlanningFailed:
 
 
 # auto: by regrasps, then by expected motion time: the fingers turn the object last (finger
-# gaiting takes about TURN_S_PER_RAD seconds of motion per radian on top of the arm's moves, and
-# a hand-over's or a place-and-regrasp's whole motion in our suites at most 37 s; docs/DESIGN-NOTES.md), and its search is the
-# dearest (seconds to a minute), so it runs only when the arms' moves cannot do the task
+# gaiting takes about TURN_S_PER_RAD seconds of motion per radian on top of the arm's moves,
+# and a hand-over's or a place-and-regrasp's whole motion in our suites at most 37 s;
+# docs/DESIGN-NOTES.md), and its search is the dearest (seconds to a minute), so it runs
+# only when the arms' moves cannot do the task
 LEVELS = {"auto": ("one-arm", "handover", "place-regrasp", "inhand"), "one-arm": ("one-arm",),
           "handover": ("handover",), "inhand": ("inhand",), "place-regrasp": ("place-regrasp",)}
 TURN_S_PER_RAD = 36.0  # s of finger-gaiting motion per radian the object turns (the in-hand suite's median, 24-108)
