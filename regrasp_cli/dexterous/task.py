@@ -321,8 +321,7 @@ def _outcome(problem: Problem, s: GsScratch, pieces: list[Piece], stages: dict, 
     robot, spec = problem.robot, problem.spec
     names = [f.name for f in robot.hands[spec.hand].spec.fingers]
     steps = turn(spec.hand, piece_motions(pieces, names, s.X_WG))
-    phases = time_steps(steps, {}, robot.velocity, np.full(robot.nq, OnlineOptions.acceleration), None,
-                        OnlineOptions.held_speed)
+    phases = time_steps(steps, {}, robot.velocity, np.full(robot.nq, OnlineOptions.acceleration))
     gaits = sum(isinstance(p, Regrasp) for p in pieces)
     counts = {**counts, "nodes_generated": s.generated, "finger_regrasps": gaits, "transfers": len(pieces) - gaits,
               "collision_checks": s.checks, "gs_failures": dict(s.failures)}
