@@ -67,6 +67,7 @@ class RunItem:
     style: str = "auto"
     exhaustive: int = 0
     sampler: str = "faces"
+    held_speed: float | None = None
     labels: tuple[tuple[str, object], ...] = ()  # more fields of its record (an in-hand run's hand, object, goal)
 
 
@@ -92,7 +93,7 @@ def items_of(suite: Suite, cache_dir: Path, plan_dir: Path) -> list[RunItem]:
                 items.append(RunItem(labels[scene], str(scene), planner, seed, str(Path(cache_dir).resolve()),
                                      str((plan_dir / f"{name}.json").resolve()), suite.budget_s,
                                      suite.roadmap_nodes, suite.grasp_target, suite.iterations, suite.style,
-                                     suite.exhaustive, suite.sampler))
+                                     suite.exhaustive, suite.sampler, suite.held_speed))
     return items
 
 
@@ -172,7 +173,7 @@ def request_of(item: RunItem):
 
     return Request(planner=item.planner, style=item.style, seed=item.seed, jobs=1, sampler=item.sampler,
                    roadmap_nodes=item.roadmap_nodes, grasp_target=item.grasp_target, iterations=item.iterations,
-                   ompl_time=item.budget_s)
+                   ompl_time=item.budget_s, held_speed=item.held_speed)
 
 
 @functools.lru_cache(maxsize=4)
@@ -190,7 +191,8 @@ def _context(scene_file: str, cache_dir: str, request, stamp: tuple):
 
 
 def _item_context(item: RunItem):
-    request = replace(request_of(item), seed=None, iterations=None, ompl_time=None)  # what loading reads
+    # what loading reads (the cache key of _context)
+    request = replace(request_of(item), seed=None, iterations=None, ompl_time=None, held_speed=None)
     return _context(item.scene_file, item.cache_dir, request, _stamp(item.scene_file, item.cache_dir))
 
 

@@ -7,7 +7,8 @@ integers; default 20); ``budget_s`` (wall-clock seconds per run, default 60); op
 single-query planners, ours and OMPL's, and of the roadmap planner's fallback, so that
 every planner gets the same), ``roadmap_nodes`` (default 50) and ``grasp_target``
 (default: the grasp builder's), ``style`` (as `regrasp plan --style`, default ``auto``),
-``sampler`` (as `regrasp plan --sampler`, default ``faces``) and ``exhaustive`` (default false: after each solved run, look for a path of fewer
+``sampler`` (as `regrasp plan --sampler`, default ``faces``), ``held_speed`` (as `regrasp
+plan --held-speed`, in (0, 1], default the planner's 0.5) and ``exhaustive`` (default false: after each solved run, look for a path of fewer
 regrasps over the same manipulation graph, solving the motions of every edge it needs, up
 to ``exhaustive`` edges; the record says whether the plan's count is the minimum).
 Every error is an :class:`~regrasp_cli.errors.InputError` naming the file and field.
@@ -52,6 +53,7 @@ class Suite:
     style: str = "auto"
     exhaustive: int = 0  # edges whose motions the exhaustive check may solve per run (0: no check)
     sampler: str = "faces"
+    held_speed: float | None = None  # None: the planner's (OnlineOptions.held_speed)
 
 
 def _planners(file: Path | None, field: str, names: list) -> tuple[str, ...]:
@@ -70,7 +72,7 @@ def load_suite(path: str | Path) -> Suite:
     file, data = read_yaml(path)
     f = Fields(file, data)
     f.only("format", "name", "scenes", "planners", "seeds", "budget_s", "iterations", "roadmap_nodes",
-           "grasp_target", "style", "exhaustive", "sampler")
+           "grasp_target", "style", "exhaustive", "sampler", "held_speed")
     fmt = f.str("format")
     if fmt != SUITE_FORMAT:
         raise f.error("format", f"expected {shown(SUITE_FORMAT)}, found {shown(fmt)}")
@@ -97,8 +99,9 @@ def load_suite(path: str | Path) -> Suite:
     sampler = f.str("sampler", "faces")
     if sampler not in SAMPLERS:
         raise f.error("sampler", f"expected one of {', '.join(SAMPLERS)}, found {shown(sampler)}")
+    held = f.float("held_speed", None, positive=True, maximum=1.0)
     return Suite(file, name, scene_paths, _planners(file, "planners", planners), seeds, float(budget), nodes, target,
-                 iterations, style, f.int("exhaustive", 0, minimum=0), sampler)
+                 iterations, style, f.int("exhaustive", 0, minimum=0), sampler, held)
 
 
 def file_name(file: Path | None, field: str, value: str, names: str) -> str:

@@ -153,7 +153,7 @@ def _run_bench(suite_file: Path, cache_dir: Path, out_dir: Path | None, jobs: in
                                             "planners": list(suite.planners), "seeds": list(suite.seeds),
                                             "budget_s": suite.budget_s, "iterations": suite.iterations,
                                             "roadmap_nodes": suite.roadmap_nodes,
-                                            "grasp_target": suite.grasp_target},
+                                            "grasp_target": suite.grasp_target, "held_speed": suite.held_speed},
             "jobs": jobs, "backend": where, "runs": len(items), "offline": offline}
     atomic_write_text(out_dir / "meta.json", json.dumps(meta, indent=1, default=_plain) + "\n")
     err.print(f"{len(items)} runs ({len(suite.scenes)} scene(s) x {len(suite.planners)} planner(s) x "

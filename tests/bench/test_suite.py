@@ -40,6 +40,16 @@ def test_seeds_as_a_list_and_defaults(tmp_path):
     assert load_suite(write(tmp_path, seeds=None)).seeds == tuple(range(20))
     assert load_suite(write(tmp_path, sampler="vis-prm")).sampler == "vis-prm"
     assert load_suite(write(tmp_path)).sampler == "faces"
+    assert load_suite(write(tmp_path)).held_speed is None
+    assert load_suite(write(tmp_path, held_speed=1.0)).held_speed == 1.0
+
+
+def test_a_suite_s_held_speed_reaches_each_run_s_planner(tmp_path):
+    from regrasp_cli.bench.runner import items_of, request_of
+
+    suite = load_suite(write(tmp_path, held_speed=0.75))
+    item = items_of(suite, tmp_path / "cache", tmp_path / "plans")[0]
+    assert request_of(item).options("pick-and-place").held_speed == 0.75
 
 
 @pytest.mark.parametrize("fields, field, words", [
@@ -61,6 +71,8 @@ def test_seeds_as_a_list_and_defaults(tmp_path):
     ({"extra": 1}, "extra", "unknown key"),
     ({"style": "two-arm"}, "style", "expected one of auto"),
     ({"sampler": "grid"}, "sampler", "expected one of faces, vis-prm"),
+    ({"held_speed": 0}, "held_speed", "> 0"),
+    ({"held_speed": 1.5}, "held_speed", "<= 1"),
 ])
 def test_bad_fields_name_the_file_and_field(tmp_path, fields, field, words):
     path = write(tmp_path, **fields)
