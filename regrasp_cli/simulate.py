@@ -13,7 +13,10 @@ The world (:func:`build_world`):
   links (``gravcomp``), as a robot's controller does; a URDF mimic as an equality;
 - the obstacles, static; the object a free body of coacd's convex parts with a uniform
   density, the plan's friction and the grasp model's torsional friction
-  (:func:`.grasp.quality.default_torsion_mu`; MuJoCo's condim 4);
+  (:func:`.grasp.quality.default_torsion_mu`; MuJoCo's condim 4); the fingers of a hand
+  of point contacts (robot.yaml's ``contact: point``) touch it as its grasps were judged,
+  with friction and no torsional friction (condim 3): a fingertip that spins on the
+  object as it rolls (in-hand transfers) does not drag it;
 - links do not collide with each other (the plan is checked for that by the validator),
   they do with the obstacles and the object.
 
@@ -173,15 +176,16 @@ def _decompose(coacd, v: np.ndarray, f: np.ndarray, params: dict) -> list[np.nda
 
 
 def _add_robot_geom(mujoco, coacd, spec, body, go, exact: bool, threshold: float, name: str,
-                    cache_dir: Path | None) -> None:
+                    cache_dir: Path | None, contact: dict) -> None:
     """The robot geometry ``go`` (a pinocchio GeometryObject) on ``body``: contype 1
-    (links), colliding with obstacles and the object (2), not with links."""
+    (links), colliding with obstacles and the object (2), not with links; ``contact``:
+    MuJoCo geom attributes of its contacts (empty: the object's)."""
     import coal
 
     g = go.geometry
     X = go.placement
     kw = dict(pos=X.translation, quat=_quat(mujoco, X.rotation), contype=1, conaffinity=2, density=0.0,
-              group=1)
+              group=1) | contact
     G = mujoco.mjtGeom
     if isinstance(g, coal.Box):
         body.add_geom(type=G.mjGEOM_BOX, size=np.asarray(g.halfSide), **kw)
@@ -203,6 +207,9 @@ def _add_robot_geom(mujoco, coacd, spec, body, go, exact: bool, threshold: float
             body.add_geom(type=G.mjGEOM_MESH, meshname=f"{name}_{k}", **kw)
     else:
         raise InputError(None, "robot collision geometry", f"cannot simulate a {type(g).__name__} ({go.name})")
+
+
+SOLREF = [0.005, 1.0]  # MuJoCo's time constant (s) and damping ratio of the object's contacts: stiff (default 0.02)
 
 
 @dataclass(frozen=True)
@@ -257,9 +264,14 @@ def build_world(inputs: Inputs, X_WO0: np.ndarray, opts: SimOptions, cache_dir: 
         jt.armature = opts.finger_armature if i in fingers else opts.arm_armature
         bodies[j] = b
     exact = set(robot.spec.exact_meshes)
+    mu = inputs.friction
+    point_fingers = {int(i) for hand in robot.hands.values() if hand.spec.contact == "point" for i in hand.idx}
+    # priority over the object's: the pair takes these, the object's stiffness too
+    point = dict(priority=2, condim=3, friction=[mu, 0.0, 0.0], solref=SOLREF)
     for k, go in enumerate(robot.collision_model.geometryObjects):
         _add_robot_geom(mujoco, coacd, spec, bodies[go.parentJoint], go,
-                        model.frames[go.parentFrame].name in exact, opts.coacd_threshold, f"link{k}", cache_dir)
+                        model.frames[go.parentFrame].name in exact, opts.coacd_threshold, f"link{k}", cache_dir,
+                        point if go.parentJoint - 1 in point_fingers else {})
     for f, (lead, m, o) in robot.mimic.items():
         spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=robot.joint_names[f], name2=robot.joint_names[lead],
                           data=[o, m, 0, 0, 0] + [0] * 7)
@@ -281,13 +293,12 @@ def build_world(inputs: Inputs, X_WO0: np.ndarray, opts: SimOptions, cache_dir: 
     parts = convex_parts(coacd, inputs.mesh.vertices, inputs.mesh.faces, opts.coacd_threshold, cache_dir)
     body = spec.worldbody.add_body(name="object", pos=X_WO0[:3, 3], quat=_quat(mujoco, X_WO0[:3, :3]))
     body.add_freejoint(name="object")
-    mu = inputs.friction
     for k, v in enumerate(parts):
         spec.add_mesh(name=f"object_{k}", uservert=v.reshape(-1))
         # priority 1: the object's friction is the contact's (MuJoCo takes the larger of
         # two equal-priority geoms', and the links' default 1.0 would hide the plan's)
         body.add_geom(type=G.mjGEOM_MESH, meshname=f"object_{k}", contype=2, conaffinity=3, condim=4,
-                      friction=[mu, default_torsion_mu(mu), 0.0], density=opts.density, priority=1, solref=[0.005, 1.0])
+                      friction=[mu, default_torsion_mu(mu), 0.0], density=opts.density, priority=1, solref=SOLREF)
     actuated = np.array([i for i in range(len(robot.joint_names)) if i not in robot.mimic], dtype=int)
     for i in actuated:
         a = spec.add_actuator(name=robot.joint_names[i], target=robot.joint_names[i], trntype=mujoco.mjtTrn.mjTRN_JOINT)
@@ -381,7 +392,7 @@ def _ramp(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
     return np.clip((t - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)
 
 
-def _pushes(plan: Plan, inputs: Inputs, samples: Samples, force: float,
+def contact_pushes(plan: Plan, inputs: Inputs, samples: Samples, force: float,
             ramp: float) -> list[list[tuple[str, str, np.ndarray, float, np.ndarray]]]:
     """Per sample, the contacts that squeeze: (hand, finger, force on the object in O (3,)
     N, weight in [0, 1], the contact point in O (3,) m), the forces :func:`internal_forces` of the contacts held.  A
@@ -390,7 +401,10 @@ def _pushes(plan: Plan, inputs: Inputs, samples: Samples, force: float,
     earlier drives the fingers still in flight ahead of the plan: they arrive one by one and
     push the object along its support), one opening off it ramped down over the first; in-hand, along
     a segment the blend (1 - s) F_a + s F_b of the internal forces of the contacts at its
-    two ends (a finger leaving or arriving fades out or in, and the sum stays balanced)."""
+    two ends (each balanced, so is the sum), s linear in time, but over the segment's first
+    ``ramp`` s where a finger leaves and its last where one arrives: the others take the
+    leaving finger's load before it lifts (a finger fading out over the whole segment
+    left the others pressing for four, and the ball turned 0.22 rad)."""
     robot = inputs.robot
     mu = inputs.friction
     out: list[list[tuple[str, str, np.ndarray, float, np.ndarray]]] = [[] for _ in samples.t]
@@ -428,8 +442,13 @@ def _pushes(plan: Plan, inputs: Inputs, samples: Samples, force: float,
             hand_of = {f.name: h for h in p.touching for f in robot.hands[h].spec.fingers}
             seg = np.clip(np.searchsorted(p.times, t, side="right") - 1, 0, len(p.times) - 2)
             for i, j, tt in zip(at, seg, t):
-                s = float(_ramp(np.array(tt), p.times[j], p.times[j + 1]))
                 ends = [squeeze_of(p.contacts[j], hand_of), squeeze_of(p.contacts[j + 1], hand_of)]
+                t0, t1 = p.times[j], p.times[j + 1]
+                r = min(ramp, t1 - t0)
+                # a finger lets go once the others have taken its load, and takes it back once it touches
+                t0, t1 = (t0, t0 + r) if len(ends[1]) < len(ends[0]) else (t1 - r, t1) if len(ends[1]) > len(
+                    ends[0]) else (t0, t1)
+                s = float(_ramp(np.array(tt), t0, t1))
                 for f in sorted(ends[0].keys() | ends[1].keys()):  # (1 - s) F_j + s F_j+1: each balanced
                     F = sum(w * e[f][0] for w, e in ((1.0 - s, ends[0]), (s, ends[1])) if f in e)
                     point = (ends[0].get(f) or ends[1][f])[1]
@@ -459,7 +478,7 @@ def point_jacobian(model, data, frame: int, p_W: np.ndarray) -> np.ndarray:
 
 
 def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float, ramp: float) -> np.ndarray:
-    """(m, nq) joint torques (N m or N) per sample: each squeezing contact (:func:`_pushes`)
+    """(m, nq) joint torques (N m or N) per sample: each squeezing contact (:func:`contact_pushes`)
     pushes with its force (``force`` N on average) times its weight, turned into W by the
     plan's object pose, at its contact point, through its finger's joints only:
     tau = J_c^T f at the plan's configuration, J_c the Jacobian of the point of the
@@ -468,7 +487,7 @@ def squeeze_torques(plan: Plan, inputs: Inputs, samples: Samples, force: float, 
     model = robot.model
     data = model.createData()
     v_of = np.array([model.joints[j].idx_v for j in range(1, model.njoints)], dtype=int)
-    pushes = _pushes(plan, inputs, samples, force, ramp)
+    pushes = contact_pushes(plan, inputs, samples, force, ramp)
     finger_of = {(hand, x.name): f for hand, h in robot.hands.items() for f, x in enumerate(h.spec.fingers)}
     tau = np.zeros((len(samples.t), len(robot.joint_names)))
     for i, push in enumerate(pushes):

@@ -1,6 +1,6 @@
 """`regrasp inhand plan` end to end on the shipped ball scene (seed 003's experiment with
 `builtin:hand4`), `regrasp validate` accepting the plan and rejecting it when a regrasp
-breaks force closure, a fingertip leaves the surface or the object jumps, and bad input
+breaks force closure, a fingertip leaves the surface or slips on it or the object jumps, and bad input
 (a start grasp that does not hold, an object too big for the hand, an unreachable goal)
 as one line with exit code 2 and no plan written."""
 
@@ -83,6 +83,28 @@ def test_validate_rejects_a_fingertip_off_the_surface(tmp_path, planned):
     assert any(i.check == "grasp" and "off the object's surface" in i.message for i in issues)
 
 
+def test_validate_rejects_fingertips_that_slip(tmp_path, planned):
+    """The ball spun under fingers that do not move (0.1 rad about its centre over a
+    transfer, each contact turned back with it): every fingertip stays on its contact, on
+    the surface, in force closure, but slips R * 0.1 = 3.5 mm on the ball."""
+    out, d = planned
+    assert not [i for i in validate_plan(out).issues if "slips" in i.message]
+
+    def edit(d):
+        p = _first(d, "inhand-transfer")
+        k = len(p["object_poses"])
+        for i in range(k):
+            R_z = Rotation.from_rotvec([0.0, 0.0, 0.1 * i / (k - 1)]).as_matrix()
+            X = np.array(p["object_poses"][i])
+            X[:3, :3] = X[:3, :3] @ R_z
+            p["object_poses"][i] = X.tolist()
+            for c in p["contacts"][i]:
+                c["point"], c["normal"] = (list(R_z.T @ np.array(c[key])) for key in ("point", "normal"))
+    issues = _tampered(tmp_path, d, edit)
+    assert any(i.check == "grasp" and "slips on the object" in i.message for i in issues)
+    assert not any(i.check == "grasp" and "slips" not in i.message for i in issues)
+
+
 def test_validate_rejects_an_object_that_jumps(tmp_path, planned):
     out, d = planned
 
@@ -99,9 +121,9 @@ def test_a_start_grasp_that_does_not_hold_is_one_line(tmp_path, cache_dir, plann
     start = {c["finger"]: [float(x) for x in c["point"]] for c in d["phases"][0]["contacts"][0]}
     p = np.array(list(start.values()))
     n = p / np.linalg.norm(p, axis=1, keepdims=True)  # a ball's normals
-    assert closure(p, n, 0.1, np.zeros(3), 0.035) == 0.0  # the planned start, with less friction
+    assert closure(p, n, 0.02, np.zeros(3), 0.035) == 0.0  # the planned start, with little friction
     scene = write_scene(tmp_path / "s.yaml", _scene(start_grasp=start, object={"mesh": "builtin:ball",
-                                                                               "friction": 0.1}))
+                                                                               "friction": 0.02}))
     result = run("--cache-dir", cache_dir, "inhand", "plan", scene, "-o", tmp_path / "p.json")
     assert_one_error_line(result, str(scene), "start_grasp", "not force closure")
     assert not (tmp_path / "p.json").exists()

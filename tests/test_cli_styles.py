@@ -144,24 +144,18 @@ def test_jaws_cannot_turn_the_object_in_the_hand(cache, tmp_path):
     assert "three or more fingertips" in " ".join(result.output.split())
 
 
-def test_the_humanoid_turns_the_ball_in_its_fingers_between_cup_and_niche(tmp_path):
-    """Issue 42: no grasp serves both ends and nothing may hold the ball between them; with
-    --style inhand one hand lifts it, turns it by finger gaiting (seed 003) to a grasp the
-    niche admits, and places it: one regrasp, the in-hand phases validated with the rest.
-    (Default-size grasp lists: the small ones have no four-finger grasp at both ends.)"""
-    from regrasp_cli.validate import validate_plan
-
+def test_the_humanoid_cannot_turn_the_ball_firmly_between_cup_and_niche(tmp_path):
+    """Issue 42's scene (a): no grasp serves both ends and nothing may hold the ball between
+    them.  Turning it in the left hand's fingers (seed 003) needs, at every finger step,
+    three fingers that hold a ball firmly (GsScratch.firm); the humanoid's thumb opposes
+    three fingers, and its plans that stepped with less threw the ball in MuJoCo
+    (docs/BENCHMARKS.md, "In-hand reorientation"): the in-hand style fails and says where,
+    writing a failed plan, never a solved one."""
     out = tmp_path / "plan.json"
     result = run("--cache-dir", tmp_path / "cache", "plan", SCENES / "humanoid_cup_to_niche.yaml", "-o", out,
                  "--style", "inhand", "--roadmap-nodes", "12")
-    assert result.exit_code == 0, result.output
+    assert result.exit_code == 1, result.output
+    assert "did not turn the object from one grasp to the other" in " ".join(result.output.split())
     plan = json.loads(out.read_text())
-    c = plan["stats"]["counts"]
-    assert c["style"] == "inhand" and c["regrasps"] == 1 and c["edges"] == ["arrive", "inhand", "leave"]
-    kinds = [p["kind"] for p in plan["phases"]]
-    turning = [p for p in plan["phases"] if p["kind"].startswith("inhand")]
-    assert "inhand-transfer" in kinds and "inhand-regrasp" in kinds
-    assert all(p["touching"] == turning[0]["touching"] and not p["holding"] for p in turning)
-    held = [p["holding"] for p in plan["phases"] if p["kind"] == "transfer"]
-    assert len(held) == 2 and held[0] != held[1] and held[0].keys() == held[1].keys()  # one hand, two grasps
-    assert validate_plan(out).valid
+    assert plan["status"] == "failed" and plan["failure"]["stage"] == "transition"
+    assert plan["failure"]["transition"].startswith("inhand left-")

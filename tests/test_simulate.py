@@ -188,3 +188,75 @@ def test_bad_input_is_one_line_and_writes_nothing(pinch, tmp_path, monkeypatch):
     monkeypatch.setattr("regrasp_cli.simulate.importlib.import_module", without_mujoco)
     assert_one_error_line(run("simulate", d / "plan.json", "-o", out), "mujoco", "regrasp[sim]")
     assert not out.exists()
+
+
+BALL = ROOT / "regrasp_cli" / "data" / "scenes" / "inhand_ball.yaml"
+
+
+@pytest.fixture(scope="module")
+def ball(tmp_path_factory):
+    """The shipped in-hand ball plan (hand4, seed 003's experiment) and its simulation."""
+    d = tmp_path_factory.mktemp("simulate_ball")
+    cache = d / "cache"
+    result = run("--cache-dir", cache, "inhand", "plan", BALL, "-o", d / "plan.json", "--no-timings")
+    assert result.exit_code == 0, result.output
+    sim = run("--cache-dir", cache, "simulate", d / "plan.json", "-o", d / "report.json")
+    return d, cache, sim, json.loads((d / "report.json").read_text())
+
+
+def test_the_shipped_ball_turned_in_the_hand_holds_in_physics(ball):
+    """Issue 43: every finger step and every turn of the ball plan keeps the ball within
+    1 cm and 0.1 rad of the plan, the fingertips rolling on it (point contacts) and each
+    finger letting go only where the other three hold it with margin."""
+    d, _, sim, report = ball
+    assert sim.exit_code == 0, sim.output
+    kinds = {p["kind"] for p in report["phases"]}
+    assert kinds == {"inhand-transfer", "inhand-regrasp"} and report["ok"] is True
+    assert all(p["ok"] and p["max_angle"] <= 0.1 for p in report["phases"])
+
+
+def test_a_point_contact_hand_touches_without_torsional_friction(ball):
+    """hand4 is declared ``contact: point``: its fingers touch the object with friction
+    and no torsion (condim 3), as its grasps were judged; the object's own contacts (with
+    the palm, or a soft hand) keep the soft finger's torsional friction (condim 4)."""
+    import mujoco
+
+    from regrasp_cli.simulate import build_world
+
+    d, cache, _, _ = ball
+    plan = read_plan(d / "plan.json")
+    inputs = load_inputs(plan, d / "plan.json")
+    world = build_world(inputs, np.eye(4), SimOptions(), cache)
+    m = world.model
+    fingers = {inputs.robot.joint_names[i] for h in inputs.robot.hands.values() for i in h.idx}
+    on_finger = np.array([m.body(int(m.geom_bodyid[g])).name in fingers for g in range(m.ngeom)])
+    obj = m.geom_bodyid == world.object_body
+    assert on_finger.sum() >= 8 and np.all(m.geom_condim[on_finger] == 3)
+    assert np.all(m.geom_friction[on_finger, 1] == 0.0)
+    assert m.geom_priority[on_finger].min() > m.geom_priority[obj].max()
+    assert np.all(m.geom_condim[obj] == 4) and np.all(m.geom_friction[obj, 1] > 0.0)
+    assert mujoco.mj_version() > 0
+
+
+def test_a_stepping_finger_hands_its_load_to_the_others_before_it_lifts(ball):
+    """In a finger's regrasp the squeeze goes over to the n-1 others' within the first
+    ``squeeze_ramp`` s, while the finger still touches: from then on the lifted finger
+    pushes nothing and the others' pushes balance (no net force)."""
+    from regrasp_cli.simulate import contact_pushes
+
+    d, _, _, _ = ball
+    plan = read_plan(d / "plan.json")
+    inputs = load_inputs(plan, d / "plan.json")
+    opts = SimOptions()
+    samples = sample_plan(plan, d / "plan.json", inputs, 1.0 / opts.timestep)
+    pushes = contact_pushes(plan, inputs, samples, opts.squeeze_n, opts.squeeze_ramp)
+    k, p = next((k, p) for k, p in enumerate(plan.phases) if p.kind.value == "inhand-regrasp")
+    lifted = ({c["finger"] for c in p.contacts[0]} - {c["finger"] for c in p.contacts[1]}).pop()
+    at = np.flatnonzero(samples.phase == k)
+    t = samples.t[at]
+    first = at[np.searchsorted(t, p.times[0] + 1e-9)]
+    assert any(f == lifted and np.linalg.norm(F) > 1.0 for _, f, F, _, _ in pushes[first])
+    for i in at[(t >= p.times[0] + opts.squeeze_ramp) & (t <= p.times[-2])]:
+        assert all(np.linalg.norm(F) < 1e-9 for _, f, F, _, _ in pushes[i] if f == lifted)
+        total = sum(w * F for _, f, F, w, _ in pushes[i])
+        assert np.linalg.norm(total) < 1e-6 * opts.squeeze_n

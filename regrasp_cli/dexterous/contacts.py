@@ -44,6 +44,17 @@ def holds(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: floa
     return len(p) >= 2 and origin_inside(primitive_wrenches(p, n, mu, centre, rho))
 
 
+def normals_meet(p: np.ndarray, n: np.ndarray) -> float:
+    """How far (m, root mean square) the contact normals' lines (through ``p`` (k, 3) along
+    ``n`` (k, 3)) pass from the point nearest all of them: 0 when they meet in one point
+    (every contact on a sphere: its centre), as then the normal forces have no moment about
+    that point, and only friction keeps the object from turning about it."""
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    M = np.eye(3)[None] - n[:, :, None] * n[:, None, :]  # projections across each line
+    x = np.linalg.lstsq(M.sum(axis=0), np.einsum("kij,kj->i", M, p), rcond=None)[0]
+    return float(np.sqrt(np.mean(np.sum(np.einsum("kij,kj->ki", M, p - x) ** 2, axis=1))))
+
+
 def gaitable(p: np.ndarray, n: np.ndarray, mu: float, centre: np.ndarray, rho: float) -> float:
     """The least epsilon over the grasps that leave one finger out (each finger may be
     lifted for a regrasp), 0.0 when one of them is not force closure; the whole grasp is

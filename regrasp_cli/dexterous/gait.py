@@ -1,13 +1,20 @@
 """Transfer and regrasping paths, and the reduction of a GS_n path to them (seed 003 §IV).
 
-A *transfer* moves the object with every contact fixed on it (the fingers follow by IK);
-a *regrasping path* keeps the object still while one finger lets go and moves to a new
-contact, the other n-1 holding it in force closure.  Only these two are physically
-feasible; a path in GS_n, where contacts slide while the object moves, is not, but when
-every n-1 fingers' grasp along it is force closure it can be replaced by alternating
-transfers and regrasps that stay near it (the reduction property, §IV-§V).
-:func:`reduce_path` does this greedily: it carries the object along the GS_n path with the
-contacts held fixed, as long as the fingers can follow and no contact has drifted more
+A *transfer* moves the object with every fingertip rolling on it without slipping (the
+fingers follow by IK, :func:`roll`); a *regrasping path* keeps the object still while one
+finger lets go and moves to a new contact, the other n-1 holding it in force closure.
+Only these two are physically feasible; a path in GS_n, where contacts slide while the
+object moves, is not, but when every n-1 fingers' grasp along it is force closure it can
+be replaced by alternating transfers and regrasps that stay near it (the reduction
+property, §IV-§V).  Seed 003 keeps each contact fixed on the object during a transfer,
+which a fingertip sphere does only by slipping on it whenever the finger turns relative
+to the object (0.3-0.6 rad in a 0.27 rad turn of the ball): in MuJoCo those slips, not the
+plan, turned the ball (docs/DESIGN-NOTES.md, "Rolling fingertips").  A rolling fingertip's
+contact moves on the object a little (2-3.5 mm in that turn), so a transfer's contacts
+are per waypoint.
+
+:func:`reduce_path` does this greedily: it carries the object along the GS_n path, the
+fingertips rolling, as long as the fingers can follow and no contact has drifted more
 than ``gait_m`` from the path's; then each drifted finger in turn steps to the path's
 contact (a regrasp), and the carrying goes on from there.
 
@@ -31,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from regrasp_cli.dexterous.gsn import GsConfig, GsScratch
 from regrasp_cli.dexterous.hand import reach, tip_targets
@@ -38,6 +46,10 @@ from regrasp_cli.dexterous.transfer import interpolate
 
 
 LIFT_TOL = 1e-5  # m: rounding of a lifted fingertip's distance to the object (lifts_clear)
+ROLL_TOL = 2e-5  # m: a rolling fingertip's centre where its turn puts it (:func:`roll`; a slip per step
+# at most this; passes on a mesh converge to under a micron, or stall at an edge between two faces)
+ROLL_PASSES = 5  # ... found in at most this many passes (two or three as a rule)
+EDGE_RAD = 0.3  # rad: a rolling contact's normal this far off its face's is on an edge (the validator's 0.35)
 OFF_M = 0.001  # m: a stepping fingertip first moves this far straight off its contact, and last onto the new one
 
 
@@ -52,17 +64,17 @@ class GaitOptions:
 
 @dataclass(frozen=True)
 class Transfer:
-    """The object moves, the contacts stay: poses (k, 4, 4) in G and configurations (k, nq),
-    the first the state it starts from."""
+    """The object moves, the fingertips roll on it: poses (k, 4, 4) in G, configurations
+    (k, nq) and contacts per waypoint, the first the state it starts from."""
 
     X_GO: np.ndarray
     q: np.ndarray
-    p: np.ndarray  # (n, 3) contacts, object frame
-    n: np.ndarray  # (n, 3) outward normals
+    p: np.ndarray  # (k, n, 3) contacts, object frame
+    n: np.ndarray  # (k, n, 3) outward normals
 
     @property
     def end(self) -> GsConfig:
-        return GsConfig(self.X_GO[-1], self.p, self.n, self.q[-1])
+        return GsConfig(self.X_GO[-1], self.p[-1], self.n[-1], self.q[-1])
 
 
 @dataclass(frozen=True)
@@ -87,10 +99,11 @@ Piece = Transfer | Regrasp
 def reversed_piece(piece: Piece) -> Piece:
     """The same motion backwards: quasi-static transfers and regrasps are reversible (a
     finger that lifted off a contact and closed on another lifts off the second and
-    closes on the first, the others holding the object all along)."""
+    closes on the first, the others holding the object all along; rolling back without
+    slipping retraces the contacts)."""
     if isinstance(piece, Regrasp):
         return Regrasp(piece.finger, piece.q[::-1].copy(), piece.after, piece.before)
-    return Transfer(piece.X_GO[::-1].copy(), piece.q[::-1].copy(), piece.p, piece.n)
+    return Transfer(piece.X_GO[::-1].copy(), piece.q[::-1].copy(), piece.p[::-1].copy(), piece.n[::-1].copy())
 
 
 def reversed_path(pieces: list[Piece]) -> list[Piece]:
@@ -236,16 +249,81 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     return None
 
 
+def _tip_rotations(s: GsScratch, q: np.ndarray, X_WO: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) the fingertip frames' orientations in the object frame at ``q``."""
+    return np.array([X_WO[:3, :3].T @ s.kin.fk(q, s.hm.hand.tip_frames[f])[:3, :3] for f in range(len(s.hand.fingers))])
+
+
+def _touch(s: GsScratch, c_O: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Contacts, outward normals (n, 3) and the normals' angles to their faces' (n,) of
+    fingertips centred at ``c_O`` (n, 3), object frame: the surface points nearest, the
+    normals towards the centres (between faces' at an edge or a vertex; the face's where a
+    centre is inside)."""
+    p, tri = s.surface.nearest(c_O)
+    away = c_O - p
+    d = np.linalg.norm(away, axis=1, keepdims=True)
+    face = s.surface.normals[tri]
+    n = np.where((d > 1e-9) & ((away * face).sum(axis=1, keepdims=True) > 0), away / np.maximum(d, 1e-12), face)
+    return p, n, np.arccos(np.clip((n * face).sum(axis=1), -1.0, 1.0))
+
+
+def roll(s: GsScratch, state: GsConfig, X_GO: np.ndarray,
+         rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray] | str:
+    """The fingers' joints (nq,), contacts and outward normals (n, 3), object frame, when
+    the object moves from ``state``'s pose to ``X_GO`` (4, 4) one small step, every
+    fingertip rolling on it without slipping; or why not: "transfer ik" (a finger cannot
+    follow), "transfer roll" (no fixed point) or "transfer edge" (a fingertip rolls over
+    an edge: its contact normal more than :data:`EDGE_RAD` off the face's, which the grasp
+    model and the validator refuse).
+
+    Point contacts (seed 003 §II): no slip at a contact, the spin about the normal free.
+    A sphere of radius r that turns by the rotation vector phi relative to the object
+    (object frame) moves its centre by r phi x n on it, n the outward normal (taken
+    halfway through the step), and stays r off the surface.  First each fingertip's point
+    at its contact is sent where the object's point there goes (IK of that point of the
+    tip frame: right to first order in the step); then the centres are put where phi
+    says, on the surface's offset, until they move less than :data:`ROLL_TOL` (a fixed
+    point that shrinks the error five- to tenfold a pass)."""
+    X_a, X_b = s.X_WG @ state.X_GO, s.X_WG @ X_GO
+    r = s.hand.radii[:, None]
+    frames = s.hm.hand.tip_frames
+    tips = [s.kin.fk(state.q, frames[f]) for f in range(len(s.hand.fingers))]
+    p_W = state.p @ X_a[:3, :3].T + X_a[:3, 3]
+    points = np.array([T[:3, :3].T @ (p - T[:3, 3]) for T, p in zip(tips, p_W)])  # in the tip frames
+    q = reach(s.hand, state.q, state.p @ X_b[:3, :3].T + X_b[:3, 3], rng, restarts=0, tol=ROLL_TOL / 4, kin=s.kin,
+              points=points)
+    if q is None:
+        return "transfer ik"
+    R_a = _tip_rotations(s, state.q, X_a)
+    c0 = state.p + r * state.n
+    c = (s.hand.tips(s.kin, q) - X_b[:3, 3]) @ X_b[:3, :3]
+    p, n, _ = _touch(s, c)
+    for _ in range(ROLL_PASSES):
+        phi = Rotation.from_matrix(_tip_rotations(s, q, X_b) @ R_a.transpose(0, 2, 1)).as_rotvec()
+        mid = (state.n + n) / np.linalg.norm(state.n + n, axis=1, keepdims=True)
+        p, n, off = _touch(s, c0 + r * np.cross(phi, mid))
+        if off.max() > EDGE_RAD:
+            return "transfer edge"
+        want = p + r * n
+        if np.abs(want - c).max() < ROLL_TOL:
+            return q, p, n
+        q = reach(s.hand, q, want @ X_b[:3, :3].T + X_b[:3, 3], rng, restarts=0, tol=ROLL_TOL / 4, kin=s.kin)
+        if q is None:
+            return "transfer ik"
+        c = want
+    return "transfer roll"
+
+
 def _transfer_step(s: GsScratch, state: GsConfig, X_GO: np.ndarray, rng: np.random.Generator,
                    o: GaitOptions) -> GsConfig | None:
-    q = reach(s.hand, state.q, tip_targets(s.X_WG @ X_GO, state.p, state.n, s.hand.radii), rng, restarts=0,
-              tol=s.options.tol, kin=s.kin)
-    why = ("transfer ik" if q is None else "transfer joint step" if np.abs(q - state.q).max() > o.max_joint_step
-           else "transfer collision" if s.collides(X_GO, q) else None)
+    rolled = roll(s, state, X_GO, rng)
+    q, p, n = rolled if not isinstance(rolled, str) else (None, state.p, state.n)
+    why = (rolled if q is None else "transfer joint step" if np.abs(q - state.q).max() > o.max_joint_step
+           else "transfer collision" if s.collides(X_GO, q) else "transfer closure" if not s.closed(p, n) else None)
     if why is not None:
         s.failures[why] = s.failures.get(why, 0) + 1
         return None
-    return GsConfig(X_GO, state.p, state.n, q)
+    return GsConfig(X_GO, p, n, q)
 
 
 def reduce_path(s: GsScratch, path: list[GsConfig], rng: np.random.Generator,
@@ -256,11 +334,11 @@ def reduce_path(s: GsScratch, path: list[GsConfig], rng: np.random.Generator,
     pieces: list[Piece] = []
     state, synced, end = path[0], 0, len(path) - 1  # synced: where the contacts were last the path's
     while True:
-        carried = [state]  # carry with the contacts held, as far as the fingers follow
+        carried = [state]  # carry, the fingertips rolling, as far as the fingers follow
         while synced + len(carried) <= end:
             i = synced + len(carried)
             nxt = _transfer_step(s, carried[-1], path[i].X_GO, rng, o)
-            if nxt is None or np.linalg.norm(path[i].p - state.p, axis=1).max() > o.gait_m:
+            if nxt is None or np.linalg.norm(path[i].p - nxt.p, axis=1).max() > o.gait_m:
                 break
             carried.append(nxt)
         # the drifted fingers step to the path's contacts where the carrying stopped, or
@@ -331,8 +409,7 @@ def _step_fingers(s: GsScratch, state: GsConfig, target: GsConfig, rng: np.rando
 
 
 def _transfer(states: list[GsConfig]) -> Transfer:
-    c = states[0]
-    return Transfer(np.array([x.X_GO for x in states]), np.array([x.q for x in states]), c.p, c.n)
+    return Transfer(*(np.array([getattr(x, k) for x in states]) for k in ("X_GO", "q", "p", "n")))
 
 
 def carry(s: GsScratch, a: GsConfig, X_GO: np.ndarray, rng: np.random.Generator, step_m: float, step_rad: float,

@@ -35,7 +35,7 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
-from regrasp_cli.dexterous.contacts import closed, closure, holds
+from regrasp_cli.dexterous.contacts import closed, closure, holds, normals_meet
 from regrasp_cli.dexterous.hand import InHand, reach, tip_targets
 from regrasp_cli.dexterous.surface import MeshSurface, along, geodesic
 from regrasp_cli.dexterous.transfer import interpolate, poses_between
@@ -59,6 +59,13 @@ class GsOptions:
     max_joint_step: float = 0.2  # rad per step: more is an IK branch jump
     tol: float = 1e-4  # m, fingertip centre on its target
     link_room: float | None = None  # m beyond a fingertip where the surface must not turn sharply (GsScratch.clear)
+    # The fingers that hold while one steps (GsScratch.liftable), when their normals nearly
+    # meet in a point (within meet_ratio times the object's radius: on a sphere they all
+    # do), must reach this Ferrari-Canny epsilon: in MuJoCo the ball's regrasps held at
+    # 0.09 and more and turned it 0.12-1.6 rad at 0.056 and less, while the cube's (normals
+    # 0.24-0.44 radii apart) held down to 0.011 (docs/DESIGN-NOTES.md, "Rolling fingertips")
+    lift_epsilon: float = 0.075
+    meet_ratio: float = 0.15
 
 
 @dataclass(frozen=True)
@@ -131,12 +138,23 @@ class GsScratch:
         return holds(p, n, self.options.friction, self.centre, self.rho)
 
     def liftable(self, c: GsConfig) -> tuple[int, ...]:
-        """The fingers that may let go: the others still hold the object (memoised per
-        set of contacts: a tree node is asked at each of its expansions)."""
+        """The fingers that may let go: the others still hold the object (memoised per set
+        of contacts: a tree node is asked at each of its expansions), firmly (:meth:`firm`)."""
         key = c.p.tobytes() + c.n.tobytes()
         if key not in self._liftable:
-            self._liftable[key] = tuple(f for f in range(len(c.p)) if self.holds(c.p, c.n, f))
+            self._liftable[key] = tuple(f for f in range(len(c.p)) if self.holds(c.p, c.n, f) and
+                                        self.firm(c.p, c.n, f))
         return self._liftable[key]
+
+    def firm(self, p: np.ndarray, n: np.ndarray, without: int) -> bool:
+        """Do the contacts but finger ``without``'s, force closure, hold the object firmly
+        enough for it to let go?  Where their normals nearly meet in a point
+        (:func:`contacts.normals_meet` within ``meet_ratio`` radii) only friction keeps the
+        object from turning about it, and they must reach a Ferrari-Canny epsilon of
+        ``lift_epsilon``; elsewhere the normal forces resist the turn."""
+        o = self.options
+        keep = np.delete(np.arange(len(p)), without)
+        return normals_meet(p[keep], n[keep]) > o.meet_ratio * self.rho or self.closure(p, n, without) >= o.lift_epsilon
 
     @cached_property
     def clear(self) -> np.ndarray:

@@ -62,15 +62,18 @@ def tip_targets(X_WO: np.ndarray, p_O: np.ndarray, n_O: np.ndarray, radii: np.nd
 
 def reach(h: InHand, q_seed: np.ndarray, targets: np.ndarray, rng: np.random.Generator,
           fingers: tuple[int, ...] | None = None, restarts: int = 3, tol: float = 1e-4,
-          kin: Kinematics | None = None) -> np.ndarray | None:
+          kin: Kinematics | None = None, points: np.ndarray | None = None) -> np.ndarray | None:
     """Joint values putting each finger of ``fingers`` (positions in ``h.fingers``; default
     all) at its target (n, 3), the other joints as in ``q_seed``; None when one cannot.
-    ``kin``: scratch the IK overwrites (a fresh one per finger when None)."""
+    The fingertip centres reach the targets, or the points ``points`` (n, 3) of the tip
+    frames, in their coordinates.  ``kin``: scratch the IK overwrites (a fresh one per
+    finger when None)."""
     q = q_seed.copy()
     options = IKOptions(restarts=restarts, tol_position=tol, patience=IK_PATIENCE)
     data = None if kin is None else kin.data
     for k in range(len(h.fingers)) if fingers is None else fingers:
-        r = finger_ik(h.robot, h.hand, h.fingers[k], targets[k], q, rng, options, data)
+        r = finger_ik(h.robot, h.hand, h.fingers[k], targets[k], q, rng, options, data,
+                      None if points is None else points[k])
         if not r.success:
             return None
         q = r.q

@@ -40,8 +40,8 @@ def piece_motions(pieces, names: list[str], X_WG: np.ndarray) -> list[FingerMoti
     for k, piece in enumerate(pieces):
         if isinstance(piece, Transfer):
             X = X_WG @ piece.X_GO
-            c = _contacts(names, piece.p, piece.n)
-            out.append(FingerMotion(Kind.INHAND_TRANSFER, f"turn {k}", piece.q, X, tuple(c for _ in X)))
+            c = tuple(_contacts(names, p, n) for p, n in zip(piece.p, piece.n))
+            out.append(FingerMotion(Kind.INHAND_TRANSFER, f"turn {k}", piece.q, X, c))
         else:
             assert isinstance(piece, Regrasp)
             X = np.repeat((X_WG @ piece.before.X_GO)[None], len(piece.q), axis=0)

@@ -226,18 +226,19 @@ def to_arrays(rm: GsRoadmap) -> dict[str, np.ndarray]:
         "pieces/edge": np.array([e for e, _ in pieces], int),
         "pieces/finger": np.array([p.finger if isinstance(p, Regrasp) else -1 for _, p in pieces], int),
         "pieces/length": lengths,
-        "pieces/p": np.array([_ends(p, "p") for _, p in pieces]).reshape(-1, 2, n_f, 3),
-        "pieces/n": np.array([_ends(p, "n") for _, p in pieces]).reshape(-1, 2, n_f, 3),
         "waypoints/X_GO": np.concatenate(X) if X else np.zeros((0, 4, 4)),
         "waypoints/q": np.concatenate([p.q for _, p in pieces]) if pieces else np.zeros((0, nq)),
+        "waypoints/p": np.concatenate([_contacts(p, "p") for _, p in pieces]) if pieces else np.zeros((0, n_f, 3)),
+        "waypoints/n": np.concatenate([_contacts(p, "n") for _, p in pieces]) if pieces else np.zeros((0, n_f, 3)),
     }
 
 
-def _ends(p: Piece, which: str) -> np.ndarray:
-    """(2, n, 3): a piece's contacts (``which`` "p") or normals ("n") before and after it."""
+def _contacts(p: Piece, which: str) -> np.ndarray:
+    """(k, n, 3): a piece's contacts (``which`` "p") or normals ("n") per waypoint (a
+    regrasp's before it but at its last, where they are those after it)."""
     if isinstance(p, Transfer):
-        return np.stack([getattr(p, which)] * 2)
-    return np.stack([getattr(p.before, which), getattr(p.after, which)])
+        return getattr(p, which)
+    return np.stack([getattr(p.before, which)] * (len(p.q) - 1) + [getattr(p.after, which)])
 
 
 def from_arrays(d: dict[str, np.ndarray]) -> GsRoadmap:
@@ -250,11 +251,10 @@ def from_arrays(d: dict[str, np.ndarray]) -> GsRoadmap:
     keys = [(int(a), int(b)) for a, b in ab]
     starts = np.concatenate([[0], np.cumsum(d["pieces/length"])])
     for k, (e, f) in enumerate(zip(d["pieces/edge"], d["pieces/finger"])):
-        X, q = d["waypoints/X_GO"][starts[k]:starts[k + 1]], d["waypoints/q"][starts[k]:starts[k + 1]]
-        p, n = d["pieces/p"][k], d["pieces/n"][k]
+        X, q, p, n = (d[f"waypoints/{w}"][starts[k]:starts[k + 1]] for w in ("X_GO", "q", "p", "n"))
         if f < 0:
-            piece: Piece = Transfer(X, q, p[0], n[0])
+            piece: Piece = Transfer(X, q, p, n)
         else:
-            piece = Regrasp(int(f), q, GsConfig(X[0], p[0], n[0], q[0]), GsConfig(X[0], p[1], n[1], q[-1]))
+            piece = Regrasp(int(f), q, GsConfig(X[0], p[0], n[0], q[0]), GsConfig(X[0], p[-1], n[-1], q[-1]))
         rm.edges[keys[int(e)]].append(piece)
     return rm

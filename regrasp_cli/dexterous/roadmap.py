@@ -276,8 +276,7 @@ def slide(s: GsScratch, a: GsConfig, X_new: np.ndarray, rng: np.random.Generator
     theirs: a thumb opposing three fingers), reduced to transfers and regrasps; None when a
     step fails (:func:`gsn.gs_path`) or the reduction does (:func:`gait.reduce_path`)."""
     centres_G = inverse(s.X_WG) @ np.c_[s.hand.tips(s.kin, a.q), np.ones(len(a.p))].T
-    tri, uv = s.surface.locate((inverse(X_new) @ centres_G)[:3].T)
-    b_p = s.surface.points(tri, uv)
+    b_p, _ = s.surface.nearest((inverse(X_new) @ centres_G)[:3].T)
     fixed = tuple(f for f in range(len(a.p)) if f not in s.liftable(a))
     b_p[list(fixed)] = a.p[list(fixed)]
     steps = gs_path(s, a, X_new, b_p, rng, fixed)

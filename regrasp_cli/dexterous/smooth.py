@@ -10,7 +10,7 @@ the fingers' last steps, then the other orders) in which every step is feasible
 (:func:`gait.finger_step`: the others hold the object, the lifted finger clears it).  A
 run ends where it ended, so the transfers around it are unchanged.
 
-Consecutive transfers are joined into one (the object moves on, the same contacts).
+Consecutive transfers are joined into one (the object moves on, the fingertips rolling on).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def _shorter_run(s: GsScratch, run: list[Regrasp], rng: np.random.Generator, o: 
 
 
 def _joined(a: Transfer, b: Transfer) -> Transfer:
-    return Transfer(np.concatenate([a.X_GO, b.X_GO[1:]]), np.concatenate([a.q, b.q[1:]]), a.p, a.n)
+    return Transfer(*(np.concatenate([getattr(a, k), getattr(b, k)[1:]]) for k in ("X_GO", "q", "p", "n")))
 
 
 def smooth(s: GsScratch, pieces: list[Piece], rng: np.random.Generator, o: GaitOptions = GaitOptions()) -> list[Piece]:

@@ -100,6 +100,14 @@ class MeshSurface:
         bary = trimesh.triangles.points_to_barycentric(self._triangles[tri], p)
         return tri, bary[:, 1:]
 
+    def nearest(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The surface points nearest the points ``p`` (n, 3), off the surface or on it, and
+        their triangles: ((n, 3), (n,)).  (:meth:`locate`'s (u, v) are those of ``p``
+        projected on the triangle's plane: outside the triangle when the nearest point
+        is on an edge.)"""
+        tri, _ = self.locate(p)
+        return trimesh.triangles.closest_point(self._triangles[tri], np.asarray(p, float).reshape(-1, 3)), tri
+
 
 def geodesic(s: MeshSurface, tri: tuple[int, int], uv: tuple[np.ndarray, np.ndarray]) -> np.ndarray | None:
     """The surface path from contact ``(tri[0], uv[0])`` to ``(tri[1], uv[1])``: (k, 3)

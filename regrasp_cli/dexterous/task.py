@@ -62,7 +62,7 @@ PLANNER = "gsn-tree"  # the plan's ``planner``: seed 003's trees in GS_n
 QUERY_ONLY = {"learn": ("query_expansions", "shortcuts"),
               "roadmap": ("nodes", "goal_bias", "start_samples", "first_tree", "goal_tree")}
 GOAL_PROBES = 40  # RLG samples at the goal pose before it is called unreachable
-ROADMAP_FORMAT, ROADMAP_VERSION = "regrasp.inhand-roadmap", 2  # 2: obstacles keyed in W
+ROADMAP_FORMAT, ROADMAP_VERSION = "regrasp.inhand-roadmap", 3  # 3: contacts per waypoint (fingertips roll)
 
 
 def load_inhand_problem(path: str | Path, cache_dir: Path | None) -> Problem:

@@ -50,12 +50,15 @@ def _dls(J: np.ndarray, e: np.ndarray, damping: float) -> np.ndarray:
 
 
 def _solve(robot: Robot, frames: tuple[int, ...], q_seed: np.ndarray, idx: np.ndarray, rng: np.random.Generator,
-           options: IKOptions, residual, reference, rows: slice, data: pin.Data | None = None) -> IKResult:
+           options: IKOptions, residual, reference, rows: slice, data: pin.Data | None = None,
+           point: np.ndarray | None = None) -> IKResult:
     """DLS with joint clamping and random restarts on the stacked tasks of ``frames``.
     ``residual(k, X) -> (e, position error, rotation error)`` for frame ``frames[k]`` at
     X, with ``e`` expressed in ``reference``, the frame of the Jacobian rows kept
-    (``rows``); the errors reported are the largest over the frames.  ``data``: scratch
-    to overwrite (a :class:`Kinematics`'s; made afresh when None, ~20-120 us)."""
+    (``rows``); the errors reported are the largest over the frames.  ``point`` (3,): the
+    task is the position of this point of the (one) frame, in its coordinates, not its
+    origin's (world-aligned rows 0-5 are taken and turned into the point's velocity).
+    ``data``: scratch to overwrite (a :class:`Kinematics`'s; made afresh when None, ~20-120 us)."""
     model = robot.model
     data = model.createData() if data is None else data
     lo, hi = robot.lower[idx], robot.upper[idx]
@@ -74,7 +77,10 @@ def _solve(robot: Robot, frames: tuple[int, ...], q_seed: np.ndarray, idx: np.nd
             if reference != pin.LOCAL_WORLD_ALIGNED:
                 pin.forwardKinematics(model, data, qp)
             Js = [pin.computeFrameJacobian(model, data, qp, f, reference)[rows] for f in frames]
-            res = [residual(k, pin.updateFramePlacement(model, data, f)) for k, f in enumerate(frames)]
+            Xs = [pin.updateFramePlacement(model, data, f) for f in frames]
+            res = [residual(k, X) for k, X in enumerate(Xs)]
+            if point is not None:  # v_p = v - (R p) x w
+                Js = [Js[0][:3] - pin.skew(Xs[0].rotation @ point) @ Js[0][3:]]
             ep, er = max(r[1] for r in res), max(r[2] for r in res)
             if ep < options.tol_position and er < options.tol_rotation:
                 return IKResult(q, True, ep, er, iters)
@@ -120,14 +126,22 @@ def solve_poses(robot: Robot, frames: tuple[int, ...], X_WTs: tuple[np.ndarray, 
 
 def solve_position(robot: Robot, frame: int, p_WT: np.ndarray, q_seed: np.ndarray, idx: np.ndarray,
                    rng: np.random.Generator, options: IKOptions = IKOptions(),
-                   data: pin.Data | None = None) -> IKResult:
-    """Move the joints ``idx`` so that the origin of ``frame`` reaches the point ``p_WT`` (3,)."""
+                   data: pin.Data | None = None, p_F: np.ndarray | None = None) -> IKResult:
+    """Move the joints ``idx`` so that the origin of ``frame`` (or its point ``p_F`` (3,),
+    in its coordinates) reaches the point ``p_WT`` (3,)."""
+    if p_F is None:
+        def residual(k: int, X):
+            e = p_WT - X.translation
+            return e, math.sqrt(e @ e), 0.0  # np.linalg.norm's own sum, without its overhead
 
-    def residual(k: int, X):
-        e = p_WT - X.translation
-        return e, math.sqrt(e @ e), 0.0  # np.linalg.norm's own sum, without its overhead
+        return _solve(robot, (frame,), q_seed, idx, rng, options, residual, pin.LOCAL_WORLD_ALIGNED, slice(0, 3), data)
 
-    return _solve(robot, (frame,), q_seed, idx, rng, options, residual, pin.LOCAL_WORLD_ALIGNED, slice(0, 3), data)
+    def residual_point(k: int, X):
+        e = p_WT - X.rotation @ p_F - X.translation
+        return e, math.sqrt(e @ e), 0.0
+
+    return _solve(robot, (frame,), q_seed, idx, rng, options, residual_point, pin.LOCAL_WORLD_ALIGNED, slice(0, 6),
+                  data, point=np.asarray(p_F, float))
 
 
 def _jacobian_columns(robot: Robot, idx: np.ndarray) -> list[int]:
@@ -154,11 +168,12 @@ def two_arm_ik(robot: Robot, hands: tuple[str, str], X_WGs: tuple[np.ndarray, np
 
 def finger_ik(robot: Robot, hand: str, finger: int, p_WT: np.ndarray, q_seed: np.ndarray,
               rng: np.random.Generator, options: IKOptions = IKOptions(restarts=3),
-              data: pin.Data | None = None) -> IKResult:
-    """Finger joints placing the centre of the fingertip sphere at ``p_WT`` (3,), metres;
-    ``data``: pinocchio scratch to overwrite (made afresh when None)."""
+              data: pin.Data | None = None, p_T: np.ndarray | None = None) -> IKResult:
+    """Finger joints placing the centre of the fingertip sphere (or its point ``p_T`` (3,),
+    in the tip frame) at ``p_WT`` (3,), metres; ``data``: pinocchio scratch to overwrite
+    (made afresh when None)."""
     h = robot.hands[hand]
-    return solve_position(robot, h.tip_frames[finger], p_WT, q_seed, h.finger_idx[finger], rng, options, data)
+    return solve_position(robot, h.tip_frames[finger], p_WT, q_seed, h.finger_idx[finger], rng, options, data, p_T)
 
 
 def arm_reachable(robot: Robot, hand: str, X_WG: np.ndarray, rng: np.random.Generator, seeds: int = 4,

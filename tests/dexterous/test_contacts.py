@@ -3,7 +3,8 @@ contacts 120° apart on the equator hold the sphere with any friction and not wi
 three on a circle of colatitude θ need mu > cot θ (friction must carry the inward pull
 along the axis); four at a regular tetrahedron's vertices hold it with friction, never
 without (on a sphere every normal passes through the centre: no torque); and for finger
-gaiting every three of the four must hold it too."""
+gaiting every three of the four must hold it too.  Contact normals on a sphere meet in its
+centre; on a cube's faces they do not."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from regrasp_cli.dexterous.contacts import closure, gaitable, holds
+from regrasp_cli.dexterous.contacts import closure, gaitable, holds, normals_meet
 
 R = 0.03
 O = np.zeros(3)
@@ -94,3 +95,16 @@ def test_fingers_around_the_object_may_each_let_go_a_thumb_opposing_three_may_no
     assert closure(p, n, 0.8, O, R) > 0.1
     assert closure(p[1:], n[1:], 0.8, O, R) == 0.0 and gaitable(p, n, 0.8, O, R) == 0.0
     assert all(closure(np.delete(p, f, 0), np.delete(n, f, 0), 0.8, O, R) > 0 for f in (1, 2, 3))
+
+
+def test_normals_on_a_sphere_meet_in_its_centre_on_a_cube_they_do_not():
+    rng = np.random.default_rng(1)
+    n = rng.normal(size=(3, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    c = np.array([0.01, -0.02, 0.005])
+    assert normals_meet(c + R * n, n) < 1e-12  # any contacts on a sphere centred at c
+    # a cube of side 2R: two fingers pinch opposite faces 2 cm off each other's line, a
+    # third presses the top face: the lines pass 1 cm, 1 cm and 0 from the best point
+    p = np.array([[R, 0.01, 0.0], [-R, -0.01, 0.0], [0.0, 0.0, R]])
+    n = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    assert normals_meet(p, n) == pytest.approx(np.sqrt(2 * 0.01 ** 2 / 3), rel=1e-9)

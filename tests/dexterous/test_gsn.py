@@ -1,7 +1,7 @@
 """GS_n on our humanoid's right hand holding a sphere (seed 003 §IV-§VI): sampled
 configurations have every fingertip on its contact, on the surface, with force closure;
 the thumb, which opposes three fingers on one side, can seldom let go (without it the
-others push from one side only), the other fingers can; a path in GS_n keeps, at every
+others push from one side only), the other fingers mostly can; a path in GS_n keeps, at every
 step, the fingertips on contacts that lie on the surface, force closure, and force
 closure without each finger whose contact moves; and a path that would move the thumb's
 contact is refused."""
@@ -59,8 +59,10 @@ def test_sampled_configurations_are_in_gs_n_and_the_thumb_seldom_lets_go(gs, rob
         thumb += THUMB in liftable
         others += bool(set(liftable) - {THUMB})
     # without the thumb the three fingers push from one side: they hold the sphere only
-    # when they wrap far around it (2 of 392 samples on a denser grid)
-    assert thumb <= 0.1 * len(configs) and others >= 0.9 * len(configs)
+    # when they wrap far around it (2 of 392 samples on a denser grid); another finger may
+    # let go in 27 or more of 30 by force closure alone, in 18 with the margin a sphere
+    # asks of the fingers left (GsScratch.firm)
+    assert thumb <= 0.1 * len(configs) and others >= 0.5 * len(configs)
 
 
 def test_a_path_in_gs_n_keeps_contacts_and_closure_at_every_step(gs, robot):
@@ -161,3 +163,18 @@ def test_memoised_results_are_the_helpers_own_before_and_after_the_memo_is_forgo
     assert [s.memoised(("other", k), lambda k=k: make(-k)) for k in (1, 2, 3)] == [-10, -20, -30]
     assert [s.memoised(("test", k), lambda k=k: make(k)) for k in (3, 1)] == [30, 10]
     assert calls == [1, 2, 3, 1, -1, -2, -3]
+
+
+def test_a_finger_lets_go_of_a_sphere_only_where_the_others_hold_it_with_margin(gs):
+    """On a sphere every contact normal passes through its centre: three fingers hold it
+    against turning by friction alone.  Of four fingertips round a ball (a grasp of the
+    shipped ball plan), the three left when one finger lifts are force closure either
+    way, but with the weakest three (epsilon 0.0005: all on one side of the ball) the ball
+    turned 1.6 rad in MuJoCo: that finger may not let go; the first may."""
+    s = gs[0]
+    n = np.array([[0.75, -0.64, 0.16], [0.29, 0.94, 0.18], [-0.81, -0.54, -0.23], [0.42, -0.89, 0.18]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    p = s.centre + R * n
+    assert all(s.holds(p, n, f) for f in range(4))
+    assert s.closure(p, n, 1) < 0.005 and not s.firm(p, n, 1)
+    assert s.firm(p, n, 0) and s.closure(p, n, 0) >= s.options.lift_epsilon
