@@ -263,7 +263,11 @@ class HandSpec:
     two joints: approach along a surface normal, each finger closed from ``open`` to
     ``closed`` until it touches) or ``auto`` (``jaw`` when the fingers are so, else
     ``pads`` when a finger has fewer than three joints, else ``fingertips``;
-    :class:`regrasp_cli.model.robot.Hand`).
+    :class:`regrasp_cli.model.robot.Hand`).  ``tip_patch`` is what the fingertips are made
+    of for `regrasp simulate`: the radius of their contact patch, whose torsional friction
+    resists a fingertip spinning on the object (soft tips, 5 mm by default), or 0 for
+    rigid tips that touch at a point (seed 003's hand: its fingertips roll and spin on the
+    object as they turn it).
     """
 
     side: str
@@ -274,6 +278,7 @@ class HandSpec:
     kind: str = "auto"
     grasp_offset: tuple[tuple[float, ...], tuple[float, ...]] | None = None  # (xyz m, rpy rad) from grasp_frame
     opposing: str | None = None  # the finger that opposes the others (the thumb), by name
+    tip_patch: float = 0.005  # m: radius of a fingertip's contact patch in simulation (0: rigid tips)
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -411,7 +416,7 @@ def _srdf_disabled(srdf: Path, file: Path) -> list[tuple[str, str]]:
 
 
 def _hand(h: Fields, side: str) -> HandSpec:
-    h.only("grasp_frame", "fingers", "contact", "kind", "opposing")
+    h.only("grasp_frame", "fingers", "contact", "kind", "opposing", "tip_patch")
     raw = h.raw("fingers")
     if not isinstance(raw, list) or not raw:
         raise h.error("fingers", "expected a non-empty list of fingers")
@@ -438,8 +443,11 @@ def _hand(h: Fields, side: str) -> HandSpec:
     opposing = h.str("opposing", None)
     if opposing is not None and opposing not in names:
         raise h.error("opposing", f"expected the name of one of the fingers ({', '.join(names)}), found {shown(opposing)}")
+    tip_patch = h.float("tip_patch", HandSpec.tip_patch, maximum=0.05)
+    if tip_patch < 0:
+        raise h.error("tip_patch", f"expected a radius >= 0 (m; 0: rigid fingertips), found {tip_patch:g}")
     link, offset = _grasp_frame(h)
-    return HandSpec(side, ARM_OF_HAND[side], link, tuple(fingers), contact, kind, offset, opposing)
+    return HandSpec(side, ARM_OF_HAND[side], link, tuple(fingers), contact, kind, offset, opposing, tip_patch)
 
 
 def _grasp_frame(h: Fields) -> tuple[str, tuple[tuple[float, ...], tuple[float, ...]] | None]:

@@ -12,11 +12,11 @@ The world (:func:`build_world`):
   exact in robot.yaml's ``exact_meshes`` split by coacd); gravity compensated on the
   links (``gravcomp``), as a robot's controller does; a URDF mimic as an equality;
 - the obstacles, static; the object a free body of coacd's convex parts with a uniform
-  density, the plan's friction and the grasp model's torsional friction
-  (:func:`.grasp.quality.default_torsion_mu`; MuJoCo's condim 4); the fingers of a hand
-  of point contacts (robot.yaml's ``contact: point``) touch it as its grasps were judged,
-  with friction and no torsional friction (condim 3): a fingertip that spins on the
-  object as it rolls (in-hand transfers) does not drag it;
+  density, the plan's friction and a soft finger's torsional friction
+  (:func:`.grasp.quality.default_torsion_mu`; MuJoCo's condim 4); a finger touches it
+  with the torsional friction of its hand's fingertip patch (robot.yaml's ``tip_patch``,
+  5 mm by default), or none where the tips are rigid (``tip_patch: 0``, condim 3: a
+  fingertip that spins on the object as it rolls in an in-hand transfer does not drag it);
 - links do not collide with each other (the plan is checked for that by the validator),
   they do with the obstacles and the object.
 
@@ -265,13 +265,14 @@ def build_world(inputs: Inputs, X_WO0: np.ndarray, opts: SimOptions, cache_dir: 
         bodies[j] = b
     exact = set(robot.spec.exact_meshes)
     mu = inputs.friction
-    point_fingers = {int(i) for hand in robot.hands.values() if hand.spec.contact == "point" for i in hand.idx}
-    # priority over the object's: the pair takes these, the object's stiffness too
-    point = dict(priority=2, condim=3, friction=[mu, 0.0, 0.0], solref=SOLREF)
+    # a finger's contacts take its hand's tips (priority over the object's), the object's stiffness
+    tips = {int(i): dict(priority=2, condim=4 if h.spec.tip_patch > 0 else 3, solref=SOLREF,
+                         friction=[mu, default_torsion_mu(mu, h.spec.tip_patch), 0.0])
+            for h in robot.hands.values() for i in h.idx}
     for k, go in enumerate(robot.collision_model.geometryObjects):
         _add_robot_geom(mujoco, coacd, spec, bodies[go.parentJoint], go,
                         model.frames[go.parentFrame].name in exact, opts.coacd_threshold, f"link{k}", cache_dir,
-                        point if go.parentJoint - 1 in point_fingers else {})
+                        tips.get(go.parentJoint - 1, {}))
     for f, (lead, m, o) in robot.mimic.items():
         spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=robot.joint_names[f], name2=robot.joint_names[lead],
                           data=[o, m, 0, 0, 0] + [0] * 7)

@@ -215,27 +215,34 @@ def test_the_shipped_ball_turned_in_the_hand_holds_in_physics(ball):
     assert all(p["ok"] and p["max_angle"] <= 0.1 for p in report["phases"])
 
 
-def test_a_point_contact_hand_touches_without_torsional_friction(ball):
-    """hand4 is declared ``contact: point``: its fingers touch the object with friction
-    and no torsion (condim 3), as its grasps were judged; the object's own contacts (with
-    the palm, or a soft hand) keep the soft finger's torsional friction (condim 4)."""
-    import mujoco
+def test_rigid_fingertips_touch_without_torsional_friction(ball):
+    """hand4's robot.yaml says ``tip_patch: 0`` (rigid tips, seed 003's point contacts): its
+    fingers touch the object with friction and no torsion (condim 3), taking precedence
+    over the object's soft-finger torsion (condim 4, which the palm's contacts keep); the
+    same hand with 5 mm patches touches with their torsional friction."""
+    import copy
+    from dataclasses import replace
 
+    from regrasp_cli.grasp.quality import default_torsion_mu
     from regrasp_cli.simulate import build_world
 
     d, cache, _, _ = ball
     plan = read_plan(d / "plan.json")
     inputs = load_inputs(plan, d / "plan.json")
-    world = build_world(inputs, np.eye(4), SimOptions(), cache)
-    m = world.model
-    fingers = {inputs.robot.joint_names[i] for h in inputs.robot.hands.values() for i in h.idx}
-    on_finger = np.array([m.body(int(m.geom_bodyid[g])).name in fingers for g in range(m.ngeom)])
-    obj = m.geom_bodyid == world.object_body
-    assert on_finger.sum() >= 8 and np.all(m.geom_condim[on_finger] == 3)
-    assert np.all(m.geom_friction[on_finger, 1] == 0.0)
-    assert m.geom_priority[on_finger].min() > m.geom_priority[obj].max()
-    assert np.all(m.geom_condim[obj] == 4) and np.all(m.geom_friction[obj, 1] > 0.0)
-    assert mujoco.mj_version() > 0
+    mu = inputs.friction
+    for patch, condim, torsion in ((0.0, 3, 0.0), (0.005, 4, default_torsion_mu(mu, 0.005))):
+        robot = copy.copy(inputs.robot)  # the same robot, its hands' tips made of another stuff
+        robot.hands = {k: replace(h, spec=replace(h.spec, tip_patch=patch)) for k, h in robot.hands.items()}
+        world = build_world(replace(inputs, robot=robot), np.eye(4), SimOptions(), cache)
+        m = world.model
+        fingers = {robot.joint_names[i] for h in robot.hands.values() for i in h.idx}
+        on_finger = np.array([m.body(int(m.geom_bodyid[g])).name in fingers for g in range(m.ngeom)])
+        obj = m.geom_bodyid == world.object_body
+        assert on_finger.sum() >= 8 and np.all(m.geom_condim[on_finger] == condim)
+        assert np.allclose(m.geom_friction[on_finger, :2], [mu, torsion])
+        assert m.geom_priority[on_finger].min() > m.geom_priority[obj].max()
+        assert np.all(m.geom_condim[obj] == 4) and np.all(m.geom_friction[obj, 1] > 0.0)
+    assert inputs.robot.hands["right"].spec.tip_patch == 0.0  # as shipped
 
 
 def test_a_stepping_finger_hands_its_load_to_the_others_before_it_lifts(ball):
