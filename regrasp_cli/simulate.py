@@ -394,7 +394,7 @@ def _ramp(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
 
 
 def contact_pushes(plan: Plan, inputs: Inputs, samples: Samples, force: float,
-            ramp: float) -> list[list[tuple[str, str, np.ndarray, float, np.ndarray]]]:
+                   ramp: float) -> list[list[tuple[str, str, np.ndarray, float, np.ndarray]]]:
     """Per sample, the contacts that squeeze: (hand, finger, force on the object in O (3,)
     N, weight in [0, 1], the contact point in O (3,) m), the forces :func:`internal_forces` of the contacts held.  A
     holding hand's grasp at full weight; a hand closing on the object (touching now,

@@ -154,7 +154,8 @@ class GsScratch:
         ``lift_epsilon``; elsewhere the normal forces resist the turn."""
         o = self.options
         keep = np.delete(np.arange(len(p)), without)
-        return normals_meet(p[keep], n[keep]) > o.meet_ratio * self.rho or self.closure(p, n, without) >= o.lift_epsilon
+        apart = normals_meet(p[keep], n[keep]) > o.meet_ratio * self.rho
+        return apart or self.closure(p, n, without) >= o.lift_epsilon
 
     @cached_property
     def clear(self) -> np.ndarray:
