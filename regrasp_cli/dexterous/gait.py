@@ -294,7 +294,7 @@ def roll(s: GsScratch, state: GsConfig, X_GO: np.ndarray,
               points=points)
     if q is None:
         return "transfer ik"
-    R_a = _tip_rotations(s, state.q, X_a)
+    R_a = np.array([X_a[:3, :3].T @ T[:3, :3] for T in tips])  # as _tip_rotations, from the frames above
     c0 = state.p + r * state.n
     c = (s.hand.tips(s.kin, q) - X_b[:3, 3]) @ X_b[:3, :3]
     p, n, _ = _touch(s, c)
