@@ -154,6 +154,14 @@ class StaticGeometry:
     centres: np.ndarray  # (m, 3) the boxes' centres, frame W
     half: np.ndarray  # (m, 3) their half sizes, each in its geometry's frame
 
+    def reaching_above(self, z: float) -> StaticGeometry:
+        """The geometries whose bounding boxes reach above the height ``z`` (m, frame W):
+        nothing lying wholly above ``z`` can touch the others."""
+        top = self.centres[:, 2] + np.einsum("mj,mj->m", np.abs(self.X_W[:, 2, :3]), self.half)
+        keep = top > z
+        return StaticGeometry(tuple(g for g, k in zip(self.geometries, keep) if k), self.X_W[keep],
+                              self.centres[keep], self.half[keep])
+
 
 def static_geometry_of(geometries: Sequence[coal.CollisionGeometry], X_W: Sequence[np.ndarray]) -> StaticGeometry:
     """The geometries at the world poses ``X_W`` (4, 4) each, with their bounding boxes."""
@@ -179,11 +187,7 @@ def hand_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry, cl
         return False
     geometries = shape.touch_geometries if touching else shape.geometries
     c = shape.centres @ X_WG[:3, :3].T + X_WG[:3, 3]
-    # each hand geometry's bounding sphere against each obstacle's bounding box (a table's
-    # bounding sphere holds most of the hand's reach, its box does not)
-    q = np.einsum("mji,nmj->nmi", env.X_W[:, :3, :3], c[:, None] - env.centres[None])  # (n, m, 3) in the boxes
-    gap = np.linalg.norm(np.maximum(np.abs(q) - env.half[None], 0.0), axis=2)
-    near = np.argwhere(gap <= shape.radii[:, None] + clearance)
+    near = np.argwhere(_box_gaps(c, env) <= shape.radii[:, None] + clearance)
     for a, b in near:
         X = X_WG @ shape.X_GL[a]
         if clearance > 0:
@@ -193,6 +197,24 @@ def hand_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry, cl
         elif _collide(geometries[a], X, env.geometries[b], env.X_W[b]):
             return True
     return False
+
+
+def may_hit_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry) -> np.ndarray:
+    """For many poses ``X_WG`` (k, 4, 4): (k,) bool, False where no bounding sphere of the
+    shape comes near an obstacle's bounding box (then :func:`hand_hits_static` is False
+    too, without asking coal)."""
+    if not len(env.geometries):
+        return np.zeros(len(X_WG), dtype=bool)
+    c = np.einsum("kij,nj->kni", X_WG[:, :3, :3], shape.centres) + X_WG[:, None, :3, 3]  # (k, n, 3)
+    return (_box_gaps(c, env) <= shape.radii[:, None]).any(axis=(1, 2))
+
+
+def _box_gaps(c: np.ndarray, env: StaticGeometry) -> np.ndarray:
+    """Distances (..., m) from points ``c`` (..., 3) in W to each obstacle's bounding box:
+    a hand geometry's bounding sphere against the box (a table's bounding sphere holds most
+    of the hand's reach, its box does not)."""
+    q = np.einsum("mji,...mj->...mi", env.X_W[:, :3, :3], c[..., None, :] - env.centres)  # in the boxes
+    return np.linalg.norm(np.maximum(np.abs(q) - env.half, 0.0), axis=-1)
 
 
 def hands_collide(a: HandShape, X_OGa: np.ndarray, b: HandShape, X_OGb: np.ndarray) -> bool:

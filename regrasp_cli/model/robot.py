@@ -81,22 +81,18 @@ class Robot:
 
     def __init__(self, spec: RobotSpec):
         self.spec = spec
-        try:
-            with _quiet_stderr():
-                model, collision, visual = pin.buildModelsFromUrdf(
-                    str(spec.urdf), package_dirs=[str(d) for d in spec.package_dirs])
-        except (RuntimeError, ValueError) as exc:
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise InputError(spec.file, "urdf", f"cannot parse URDF {spec.urdf}: {first}") from None
+        model = _from_urdf(spec, lambda: pin.buildModelFromUrdf(str(spec.urdf)))
+        collision = self._geometry(model, pin.GeometryType.COLLISION)
         self.model: pin.Model = model
-        _collision_from_visual(spec, model, collision, visual)
+        self._visual: pin.GeometryModel | None = None
+        if spec.collision_from_visual:
+            _collision_from_visual(spec, model, collision, self.visual_model)
         if not collision.ngeoms:
             raise InputError(spec.file, "urdf", f"{spec.urdf} has no <collision> geometry in any link; expected "
                                                 "collision geometry (or `collision_from_visual: [LINK, ...]` here)")
         if spec.convex_hulls:
             _convexify(spec, model, collision)
         self.collision_model: pin.GeometryModel = collision
-        self.visual_model: pin.GeometryModel = visual
 
         names, idx_q, nqs = [], [], []
         for j in range(1, model.njoints):
@@ -137,6 +133,20 @@ class Robot:
             g: self._indices(spec.groups[g], f"groups.{g}") for g in GROUP_NAMES}
         self.hands: dict[str, Hand] = {s: self._hand(h) for s, h in spec.hands.items()}
         self.q_rest = self.coupled(self.configuration(spec.rest, "rest", base=np.clip(np.zeros(n), lo, hi)))
+
+    @property
+    def visual_model(self) -> pin.GeometryModel:
+        """The URDF's visual geometry, read when first asked for: only `regrasp show` and
+        ``collision_from_visual`` use it, and its meshes are most of a URDF's load time
+        (Baxter's: 1.8 of 1.9 s)."""
+        if self._visual is None:
+            self._visual = self._geometry(self.model, pin.GeometryType.VISUAL)
+        return self._visual
+
+    def _geometry(self, model: pin.Model, kind: pin.GeometryType) -> pin.GeometryModel:
+        spec = self.spec
+        return _from_urdf(spec, lambda: pin.buildGeomFromUrdf(model, str(spec.urdf), kind,
+                                                              package_dirs=[str(d) for d in spec.package_dirs]))
 
     def _bind_follower_limits(self) -> None:
         """A follower's limits become its leader's range mapped through the mimic: its value
@@ -341,6 +351,20 @@ def carries(model: pin.Model, j: int, k: int) -> bool:
             return True
         k = model.parents[k]
     return j == 0
+
+
+def _from_urdf(spec: RobotSpec, build):
+    """``build()``'s result: a model or geometry read from the spec's URDF.
+
+    Raises:
+        InputError: pinocchio cannot read it (its first line, naming the URDF).
+    """
+    try:
+        with _quiet_stderr():
+            return build()
+    except (RuntimeError, ValueError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise InputError(spec.file, "urdf", f"cannot parse URDF {spec.urdf}: {first}") from None
 
 
 def _collision_from_visual(spec: RobotSpec, model: pin.Model, collision: pin.GeometryModel,

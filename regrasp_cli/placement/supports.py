@@ -24,7 +24,7 @@ import numpy as np
 from regrasp_cli.config import ObstacleSpec
 from regrasp_cli.errors import InputError
 from regrasp_cli.model.collision import mesh_geometry
-from regrasp_cli.model.handshape import hand_hits_static, single_shape, static_geometry
+from regrasp_cli.model.handshape import hand_hits_static, may_hit_static, single_shape, static_geometry
 from regrasp_cli.placement.stable import StablePlacement
 
 VERTICAL_COS = 1.0 - 1e-6  # an axis is vertical when its cosine with z is above this
@@ -163,18 +163,23 @@ def fit_placements(stable: list[StablePlacement], supports: list[Support], mesh,
         ys = np.arange(lo[1] + options.step / 2, hi[1], options.step)
         grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
         lifted = sup.X_WT @ _offset(options.lift)
+        # the object, lifted, lies wholly above the top + lift: what does not reach up there
+        # (the support itself, the desk under it) cannot touch it
+        env_up = env.reaching_above(sup.X_WT[2, 3] + options.lift / 2)
         for pi, sp in enumerate(stable):
             for yaw in yaws:
                 c, s = np.cos(yaw), np.sin(yaw)
                 foot = sp.footprint @ np.array([[c, s], [-s, c]])  # turned, (m, 2)
                 ok = _inside(sup.outline, grid[:, None, :] + foot[None], options.edge_margin)
-                for xy in grid[ok]:
-                    X_TS = _turn(yaw)
-                    X_TS[:2, 3] = xy
-                    X_TO = X_TS @ sp.X_SO
-                    if hand_hits_static(shape, lifted @ X_TO, env):
+                X_TO = np.repeat(_turn(yaw)[None], int(ok.sum()), axis=0)
+                X_TO[:, :2, 3] = grid[ok]
+                X_TO = X_TO @ sp.X_SO
+                X_WO = lifted @ X_TO
+                near = may_hit_static(shape, X_WO, env_up)
+                for k in range(len(X_TO)):
+                    if near[k] and hand_hits_static(shape, X_WO[k], env_up):
                         continue
-                    poses.append(sup.X_WT @ X_TO)
+                    poses.append(sup.X_WT @ X_TO[k])
                     which.append(pi)
                     where.append(si)
                     turns.append(yaw)

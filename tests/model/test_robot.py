@@ -283,3 +283,17 @@ def test_opposing_finger_is_stated_not_the_first(robot, tmp_path):
     h = other.hands["right"]
     assert h.spec.fingers[h.opposing].name == "thumb" and h.opposing == 3
     assert robot.hands["right"].opposing == 0
+
+
+def test_visual_geometry_is_read_only_when_asked_for(tmp_path):
+    """Planning reads the collision geometry alone: a visual mesh that is missing does not
+    stop it, and asking for the visual model then gets one error naming the URDF."""
+    visual = '<visual><geometry><mesh filename="meshes/gone.stl"/></geometry></visual>'
+    urdf = toy_urdf().replace('<link name="torso">', f'<link name="torso">{visual}')
+    (tmp_path / "toy.urdf").write_text(urdf)
+    (tmp_path / "robot.yaml").write_text(yaml.safe_dump(toy_robot_yaml(Path("toy.urdf"))))
+    robot = load_robot(tmp_path / "robot.yaml")
+    assert robot.collision_model.ngeoms == 10 and robot.frame_id("r_grasp") >= 0
+    with pytest.raises(InputError, match=r"cannot parse URDF .*toy\.urdf") as err:
+        robot.visual_model
+    assert err.value.field == "urdf"

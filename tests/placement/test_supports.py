@@ -11,6 +11,8 @@ from scipy.spatial.transform import Rotation
 
 from regrasp_cli.config import ObstacleSpec
 from regrasp_cli.errors import InputError
+from regrasp_cli.model.collision import mesh_geometry
+from regrasp_cli.model.handshape import hand_hits_static, single_shape, static_geometry
 from regrasp_cli.placement.stable import stable_placements
 from regrasp_cli.placement.supports import FitOptions, fit_placements, resting_gap, scene_supports, top_of
 
@@ -82,6 +84,30 @@ def test_an_obstacle_on_the_top_takes_its_place_away():
     kept = {tuple(np.round(X[:3, 3], 9)) for X in both.X_WO}
     assert not any(tuple(np.round(X[:3, 3], 9)) in kept for X in free.X_WO[near])
     assert all(tuple(np.round(X[:3, 3], 9)) in kept for X in free.X_WO[~near])
+
+
+def test_the_fits_are_those_a_check_against_every_obstacle_keeps():
+    """The fit skips coal for what cannot touch (obstacles wholly below the lifted object,
+    boxes far from its bounding sphere): its fits are exactly those that a check of every
+    candidate against every obstacle keeps.  A shelf 4 cm over the table (lower than the
+    cube), a bar tilted through the top's height, a crate below it beside the table."""
+    cube = trimesh.creation.box(extents=[0.05, 0.05, 0.05])
+    table = _box("table", (0.4, 0.4, 0.04), (0.0, 0.0, 0.7))
+    others = (_box("shelf", (0.15, 0.4, 0.01), (0.12, 0.0, 0.765)),
+              _box("bar", (0.5, 0.02, 0.02), (-0.05, -0.1, 0.73), (0.0, 0.3, 0.4)),
+              _box("crate", (0.2, 0.2, 0.2), (0.4, 0.4, 0.5)))
+    stable = stable_placements(cube, cube.center_mass)
+    options = FitOptions(step=0.03, yaws=3)
+    supports = scene_supports((table,), ("table",))
+    free = fit_placements(stable, supports, cube, (table,), options)
+    fitted = fit_placements(stable, supports, cube, (table, *others), options)
+    shape, env = single_shape(mesh_geometry(cube)), static_geometry((table, *others))
+    lift = np.eye(4)
+    lift[2, 3] = options.lift
+    kept = [not hand_hits_static(shape, lift @ X, env) for X in free.X_WO]
+    assert 0 < sum(kept) < len(kept)
+    assert np.array_equal(fitted.X_WO, free.X_WO[kept])
+    assert len(env.reaching_above(0.721).geometries) == 2  # the shelf and the bar, not the table or the crate
 
 
 def test_the_gap_under_a_resting_object_is_measured_to_the_top_beneath_it():
