@@ -64,6 +64,7 @@ class OnlineOptions:
     cartesian_step: float = 0.01  # m: dense segment check
     k_connect: int = 40  # nearest Super Graph nodes tried when connecting a configuration
     connections: int = 2  # ... until this many are joined
+    retreat_distance: float = 0.15  # m: a hand backed straight out when no node sees an end (a cage)
     escape_iterations: int = 1500  # tree growth from an end that no node sees
     repairs: int = 30  # graph re-searches per query before RRT-Connect takes over
     rrt: RRTOptions = RRTOptions(step=0.4, max_iterations=3000)

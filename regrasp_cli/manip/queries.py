@@ -28,6 +28,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from regrasp_cli.manip.context import Placed, Scratch
+from regrasp_cli.manip.keyconf import approach_axis, cartesian_line, shoulder
 from regrasp_cli.roadmap.build import RoadmapArtefact
 from regrasp_cli.motion.local import distance
 from regrasp_cli.roadmap.query import QueryMemo, shortest_path
@@ -123,6 +124,29 @@ def _detours(scratch: Scratch, q: np.ndarray) -> list[np.ndarray]:
             m[robot.groups[g]] = robot.q_rest[robot.groups[g]]
         if not np.array_equal(m, q):
             out.append(m)
+    return out
+
+
+LEVEL = np.array([1.0, 1.0, 0.0])  # a direction's horizontal part
+
+
+def _retreats(scratch: Scratch, rng: np.random.Generator, q: np.ndarray, world: Placed) -> list[np.ndarray]:
+    """Waypoints (k, nq) from q, a hand's grasp frame moved straight by ``retreat_distance``
+    (its arm alone moving), back along its approach axis or towards its shoulder (each
+    level first), the first line free in ``world``: a hand at the back of a cage or shelf
+    is seen by the roadmap from outside."""
+    robot, o = scratch.problem.robot, scratch.options
+    out = []
+    for hand in robot.hands:
+        X_WG = scratch.kin.fk(q, robot.hands[hand].grasp_frame)
+        back, home = -(X_WG[:3, :3] @ approach_axis(scratch, hand)), shoulder(scratch, hand, q) - X_WG[:3, 3]
+        for d in (back * LEVEL, back, home * LEVEL, home):
+            far = X_WG.copy()
+            far[:3, 3] += o.retreat_distance * d / max(np.linalg.norm(d), 1e-9)
+            line = cartesian_line(scratch, rng, hand, q, far, o.line_steps)
+            if line is not None and scratch.path_free(world, line[::-1]):
+                out.append(line[::-1][1:])
+                break
     return out
 
 
@@ -258,6 +282,10 @@ class _LazyView:
                 e = self.ends(mid)
                 if e:
                     return [mid], e
+        for line in _retreats(self.scratch, rng, q, full):
+            e = self.ends(line[-1])
+            if e:
+                return list(line), e
         return _escape(self.scratch, rng, self.rm, q, full, self.worlds.fingers, self.node_free, self.q_of, stats)
 
     def first_invalid_edge(self, ids: list[int], stats: QueryStats) -> tuple[int, int] | None:

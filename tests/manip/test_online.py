@@ -36,7 +36,7 @@ from regrasp_cli.model.handshape import HandShape, StaticGeometry, hand_hits_sta
 from regrasp_cli.manip.keyconf import PRESHAPE_LIFT, SingleConfig, _backed_off, approach_axis, cartesian_line, preshapes, \
     shoulder, single_configuration, with_fingers, wrist
 from regrasp_cli.manip.modes import Kind
-from regrasp_cli.manip.queries import QueryStats, Roadmap, roadmap_query
+from regrasp_cli.manip.queries import QueryStats, Roadmap, _retreats, roadmap_query
 from regrasp_cli.manip.solve import TransitionStats
 from regrasp_cli.manip.status import Stage
 from regrasp_cli.manip.tasks import handover
@@ -789,3 +789,49 @@ def test_a_failed_query_is_retried_with_the_next_double_grasp(problem, lists, ro
     assert once.counts["key_attempts"] == 1
     assert {q: s.counts() for q, s in once.transitions.items()} == \
         {q: TransitionStats().plus(first[q]).counts() for q in QUERIES}  # the same first attempt's counts
+
+
+# ------------------------------------------------------------------ retreats (an end no node sees)
+
+
+def _retreat_lines(problem, q: np.ndarray, X_WO: np.ndarray) -> dict[str, np.ndarray]:
+    """The retreat lines from q, by the hand whose arm moves (queries._retreats)."""
+    scratch = new_scratch(problem)
+    open_ = {h: problem.robot.hands[h].open for h in problem.robot.hands}
+    lines = _retreats(scratch, np.random.default_rng(0), q, phase_worlds(scratch, X_WO, None, open_).full)
+    out = {}
+    for line in lines:
+        moving = set(np.flatnonzero(np.any(line != q, axis=0)))
+        hand = next(h for h in problem.robot.hands if moving <= set(problem.robot.hands[h].arm_idx))
+        out[hand] = np.vstack([q[None], line])
+    return out
+
+
+def test_a_hand_retreats_on_a_straight_free_line_and_another_where_the_first_is_blocked(problem, single):
+    """The right hand reaching down to the desk (a single-grasp configuration, the
+    statuette away) backs straight out by ``retreat_distance`` on a free line; with the
+    statuette put where that line goes, the line is not taken and the right hand's line
+    (if any) goes another way, free of it.  At rest neither hand can back towards the
+    chest: no line."""
+    robot, kin = problem.robot, Kinematics(problem.robot)
+    q, h = single[1].q_closed, robot.hands["right"]
+    far = translated(np.eye(4), [3.0, 3.0, 0.0])
+    assert _retreat_lines(problem, robot.q_rest, far) == {}
+    distance_ = OnlineOptions().retreat_distance
+    X0 = kin.fk(q, h.grasp_frame)[:3, 3]
+
+    def check(X_WO):
+        lines = _retreat_lines(problem, q, X_WO)
+        for hand, line in lines.items():
+            assert not path_collisions(static_world(problem, X_WO), line, problem), hand
+            p = np.array([kin.fk(x, robot.hands[hand].grasp_frame)[:3, 3] for x in line])
+            step = p[-1] - p[0]
+            assert np.linalg.norm(step) == pytest.approx(distance_, abs=2e-3)
+            assert np.linalg.norm(np.cross(p - p[0], step / np.linalg.norm(step)), axis=1).max() < 2e-3  # straight
+        return {hand: kin.fk(line[-1], robot.hands[hand].grasp_frame)[:3, 3] - X0 for hand, line in lines.items()}
+
+    away = check(far)
+    assert "right" in away
+    d = away["right"] / distance_
+    blocked = check(translated(np.eye(4), X0 + 0.1 * d - [0, 0, 0.1]))  # the statuette on that line
+    assert "right" not in blocked or blocked["right"] @ d < 0.9 * distance_
