@@ -41,6 +41,9 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+import toppra
+import toppra.algorithm
+import toppra.constraint
 
 logging.getLogger("toppra").setLevel(logging.WARNING)
 
@@ -295,9 +298,6 @@ def _grid(path: BlendedPath, lo: float, hi: float, extra: np.ndarray) -> np.ndar
 
 
 def _topp(path: BlendedPath, lo: float, hi: float, v: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    import toppra.algorithm  # here: toppra imports matplotlib's pyplot, 0.2 s that validate and export never need
-    import toppra.constraint
-
     grid = _grid(path, lo, hi, path.knots)
     cons = [toppra.constraint.JointVelocityConstraint(np.column_stack([-v, v])),
             toppra.constraint.JointAccelerationConstraint(np.column_stack([-a, a]))]
