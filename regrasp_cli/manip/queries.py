@@ -21,6 +21,7 @@ The result is shortcut and returned with the Table I statistics of the query.
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,23 +131,37 @@ def _detours(scratch: Scratch, q: np.ndarray) -> list[np.ndarray]:
 LEVEL = np.array([1.0, 1.0, 0.0])  # a direction's horizontal part
 
 
-def _retreats(scratch: Scratch, rng: np.random.Generator, q: np.ndarray, world: Placed) -> list[np.ndarray]:
-    """Waypoints (k, nq) from q, a hand's grasp frame moved straight by ``retreat_distance``
-    (its arm alone moving), back along its approach axis or towards its shoulder (each
-    level first), the first line free in ``world``: a hand at the back of a cage or shelf
-    is seen by the roadmap from outside."""
+def _retreats(scratch: Scratch, rng: np.random.Generator, q: np.ndarray, world: Placed) -> Iterator[np.ndarray]:
+    """For each hand in turn, the waypoints (k, nq) after q that move its grasp frame
+    straight by ``retreat_distance`` (its arm alone moving), back along its approach axis
+    or towards its shoulder (each level first), the first such line free in ``world``:
+    a hand at the back of a cage or shelf is seen by the roadmap from outside.  Lazily:
+    the next hand's lines are solved only when asked for."""
     robot, o = scratch.problem.robot, scratch.options
-    out = []
     for hand in robot.hands:
         X_WG = scratch.kin.fk(q, robot.hands[hand].grasp_frame)
         back, home = -(X_WG[:3, :3] @ approach_axis(scratch, hand)), shoulder(scratch, hand, q) - X_WG[:3, 3]
-        for d in (back * LEVEL, back, home * LEVEL, home):
+        for d in _directions(back, home):
             far = X_WG.copy()
-            far[:3, 3] += o.retreat_distance * d / max(np.linalg.norm(d), 1e-9)
+            far[:3, 3] += o.retreat_distance * d
             line = cartesian_line(scratch, rng, hand, q, far, o.line_steps)
             if line is not None and scratch.path_free(world, line[::-1]):
-                out.append(line[::-1][1:])
+                yield line[::-1][1:]
                 break
+
+
+def _directions(*ds: np.ndarray) -> list[np.ndarray]:
+    """Unit vectors (3,): each of ``ds`` level (its horizontal part, where that is at least
+    a fifth of it and not the whole), then as it is; none of a vanishing one."""
+    out = []
+    for d in ds:
+        n = np.linalg.norm(d)
+        if n < 1e-9:
+            continue
+        level = d * LEVEL
+        if 0.2 * n <= np.linalg.norm(level) < n * (1 - 1e-9):
+            out.append(level / np.linalg.norm(level))
+        out.append(d / n)
     return out
 
 

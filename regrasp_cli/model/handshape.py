@@ -201,8 +201,8 @@ def hand_hits_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry, cl
 
 def may_hit_static(shape: HandShape, X_WG: np.ndarray, env: StaticGeometry) -> np.ndarray:
     """For many poses ``X_WG`` (k, 4, 4): (k,) bool, False where no bounding sphere of the
-    shape comes near an obstacle's bounding box (then :func:`hand_hits_static` is False
-    too, without asking coal)."""
+    shape comes near an obstacle's bounding box (then :func:`hand_hits_static` without
+    clearance is False too, without asking coal)."""
     if not len(env.geometries):
         return np.zeros(len(X_WG), dtype=bool)
     c = np.einsum("kij,nj->kni", X_WG[:, :3, :3], shape.centres) + X_WG[:, None, :3, 3]  # (k, n, 3)

@@ -155,6 +155,7 @@ def fit_placements(stable: list[StablePlacement], supports: list[Support], mesh,
     (module docstring), in that order; ``mesh`` the object's trimesh in O."""
     env = static_geometry(obstacles)
     shape = single_shape(mesh_geometry(mesh))
+    hull = np.asarray(mesh.convex_hull.vertices)  # (v, 3) in O: where the object's lowest point is
     yaws = 2 * np.pi * np.arange(options.yaws) / options.yaws
     poses, which, where, turns = [], [], [], []
     for si, sup in enumerate(supports):
@@ -163,9 +164,6 @@ def fit_placements(stable: list[StablePlacement], supports: list[Support], mesh,
         ys = np.arange(lo[1] + options.step / 2, hi[1], options.step)
         grid = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1).reshape(-1, 2)
         lifted = sup.X_WT @ _offset(options.lift)
-        # the object, lifted, lies wholly above the top + lift: what does not reach up there
-        # (the support itself, the desk under it) cannot touch it
-        env_up = env.reaching_above(sup.X_WT[2, 3] + options.lift / 2)
         for pi, sp in enumerate(stable):
             for yaw in yaws:
                 c, s = np.cos(yaw), np.sin(yaw)
@@ -175,6 +173,10 @@ def fit_placements(stable: list[StablePlacement], supports: list[Support], mesh,
                 X_TO[:, :2, 3] = grid[ok]
                 X_TO = X_TO @ sp.X_SO
                 X_WO = lifted @ X_TO
+                # what does not reach above the lifted object's lowest point (the support
+                # itself, the desk under it) cannot touch it
+                low = float((X_WO[:, 2, :3] @ hull.T + X_WO[:, 2, 3:]).min()) if len(X_WO) else 0.0
+                env_up = env.reaching_above(low - 1e-6)
                 near = may_hit_static(shape, X_WO, env_up)
                 for k in range(len(X_TO)):
                     if near[k] and hand_hits_static(shape, X_WO[k], env_up):

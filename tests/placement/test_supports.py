@@ -110,6 +110,27 @@ def test_the_fits_are_those_a_check_against_every_obstacle_keeps():
     assert len(env.reaching_above(0.721).geometries) == 2  # the shelf and the bar, not the table or the crate
 
 
+def test_a_mat_on_the_low_end_of_a_slightly_tilted_table_takes_its_places_away():
+    """A 2 m table pitched by 1.3 mrad still has a top (within VERTICAL_COS); its low end
+    lies 1.3 mm below the top's centre, under a 2.1 mm mat there: the fits that overlap the
+    mat are refused, as a check of every candidate against every obstacle refuses them."""
+    cube = trimesh.creation.box(extents=[0.05, 0.05, 0.05])
+    table = _box("table", (2.0, 0.4, 0.04), (0.0, 0.0, 0.7), (0.0, 1.3e-3, 0.0))
+    top = top_of(table)
+    p_mat = top.X_WT @ [0.95, 0.0, 0.00105, 1.0]  # lying on the top's low end (the pitch lowers +x)
+    mat = ObstacleSpec("mat", "box", (0.1, 0.4, 0.0021), _pose(p_mat[:3], (0.0, 1.3e-3, 0.0)))
+    stable = stable_placements(cube, cube.center_mass)
+    options = FitOptions(step=0.05, yaws=2)
+    free = fit_placements(stable, [top], cube, (table,), options)
+    fitted = fit_placements(stable, [top], cube, (table, mat), options)
+    shape, env = single_shape(mesh_geometry(cube)), static_geometry((table, mat))
+    lift = np.eye(4)
+    lift[2, 3] = options.lift
+    kept = [not hand_hits_static(shape, top.X_WT @ lift @ np.linalg.inv(top.X_WT) @ X, env) for X in free.X_WO]
+    assert 0 < sum(kept) < len(kept)
+    assert np.array_equal(fitted.X_WO, free.X_WO[kept])
+
+
 def test_the_gap_under_a_resting_object_is_measured_to_the_top_beneath_it():
     """A 4 x 4 x 12 cm block (origin at its base) over a table whose top is at z = 0.72:
     standing on it, 5 cm above it (PR2's scene before 0e5d0f1), 5 mm into it; beside the
