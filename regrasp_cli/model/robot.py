@@ -20,7 +20,7 @@ import sys
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Mapping
+from typing import Callable, Mapping, TypeVar
 
 import coal
 import numpy as np
@@ -144,6 +144,7 @@ class Robot:
         return self._visual
 
     def _geometry(self, model: pin.Model, kind: pin.GeometryType) -> pin.GeometryModel:
+        """The URDF's collision or visual geometry (``kind``) of ``model``'s links."""
         spec = self.spec
         return _from_urdf(spec, lambda: pin.buildGeomFromUrdf(model, str(spec.urdf), kind,
                                                               package_dirs=[str(d) for d in spec.package_dirs]))
@@ -353,7 +354,10 @@ def carries(model: pin.Model, j: int, k: int) -> bool:
     return j == 0
 
 
-def _from_urdf(spec: RobotSpec, build):
+T = TypeVar("T")
+
+
+def _from_urdf(spec: RobotSpec, build: Callable[[], T]) -> T:
     """``build()``'s result: a model or geometry read from the spec's URDF.
 
     Raises:
