@@ -65,6 +65,7 @@ class OnlineOptions:
     k_connect: int = 40  # nearest Super Graph nodes tried when connecting a configuration
     connections: int = 2  # ... until this many are joined
     retreat_distance: float = 0.15  # m: a hand backed straight out when no node sees an end (a cage)
+    retreat_lift: float = 0.02  # m: ... after rising this far, when it cannot back out straight at once
     escape_iterations: int = 1500  # tree growth from an end that no node sees
     repairs: int = 30  # graph re-searches per query before RRT-Connect takes over
     rrt: RRTOptions = RRTOptions(step=0.4, max_iterations=3000)

@@ -135,19 +135,49 @@ def _retreats(scratch: Scratch, rng: np.random.Generator, q: np.ndarray, world: 
     """For each hand in turn, the waypoints (k, nq) after q that move its grasp frame
     straight by ``retreat_distance`` (its arm alone moving), back along its approach axis
     or towards its shoulder (each level first), the first such line free in ``world``:
-    a hand at the back of a cage or shelf is seen by the roadmap from outside.  Lazily:
-    the next hand's lines are solved only when asked for."""
+    a hand at the back of a cage or shelf is seen by the roadmap from outside.  When no
+    such line is free, the same lines after rising ``retreat_lift`` straight up: an open
+    jaw round a block it let go, front and back, cannot back out level (its far finger
+    hits the block) nor up (the cage's roof), but can rise clear of the block's top and
+    then back out (baxter_cage).  Lazily: the next hand's lines are solved only when
+    asked for."""
     robot, o = scratch.problem.robot, scratch.options
     for hand in robot.hands:
         X_WG = scratch.kin.fk(q, robot.hands[hand].grasp_frame)
         back, home = -(X_WG[:3, :3] @ approach_axis(scratch, hand)), shoulder(scratch, hand, q) - X_WG[:3, 3]
-        for d in _directions(back, home):
-            far = X_WG.copy()
-            far[:3, 3] += o.retreat_distance * d
-            line = cartesian_line(scratch, rng, hand, q, far, o.line_steps)
-            if line is not None and scratch.path_free(world, line[::-1]):
-                yield line[::-1][1:]
-                break
+        directions = _directions(back, home)
+        line = _straight_out(scratch, rng, hand, q, X_WG, directions, world)
+        if line is None:
+            X_up = X_WG.copy()
+            X_up[2, 3] += o.retreat_lift
+            rise = _line(scratch, rng, hand, q, X_up, world, 2)
+            out = None if rise is None else _straight_out(scratch, rng, hand, rise[-1], X_up, directions, world)
+            line = None if out is None else np.vstack([rise, out])
+        if line is not None:
+            yield line
+
+
+def _straight_out(scratch: Scratch, rng: np.random.Generator, hand: str, q: np.ndarray, X_WG: np.ndarray,
+                  directions: list[np.ndarray], world: Placed) -> np.ndarray | None:
+    """The waypoints (k, nq) after q of the first free line moving the hand's grasp frame
+    from X_WG (4, 4) by ``retreat_distance`` along one of ``directions`` (unit, (3,)), or None."""
+    for d in directions:
+        far = X_WG.copy()
+        far[:3, 3] += scratch.options.retreat_distance * d
+        line = _line(scratch, rng, hand, q, far, world, scratch.options.line_steps)
+        if line is not None:
+            return line
+    return None
+
+
+def _line(scratch: Scratch, rng: np.random.Generator, hand: str, q: np.ndarray, X_far: np.ndarray, world: Placed,
+          steps: int) -> np.ndarray | None:
+    """The waypoints (k, nq) after q of the hand's straight line to X_far (4, 4), its arm
+    alone moving (:func:`cartesian_line`), when it is free in ``world``; else None."""
+    line = cartesian_line(scratch, rng, hand, q, X_far, steps)
+    if line is None or not scratch.path_free(world, line[::-1]):
+        return None
+    return line[::-1][1:]
 
 
 def _directions(*ds: np.ndarray) -> list[np.ndarray]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import coal
 import numpy as np
@@ -27,7 +28,8 @@ from scipy.spatial.transform import Rotation
 
 from regrasp_cli.grasp.build import BuildOptions, GraspList, load_or_build
 from regrasp_cli.grasp.single import GraspOptions
-from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, mesh_geometry, obstacle_geometry
+from regrasp_cli.model.collision import CollisionWorld, ObjectPlacement, mesh_geometry, obstacle_geometry, \
+    segment_samples
 from regrasp_cli.manip.context import OnlineOptions, Scratch
 from regrasp_cli.manip.doublegrasp import cheap_order, double_grasps, environment_free, single_configurations
 from regrasp_cli.manip.exchange import exchange_orientation, wrist_path_cost
@@ -834,3 +836,54 @@ def test_a_hand_retreats_on_a_straight_free_line_and_another_where_the_first_is_
     d = away["right"] / distance_
     blocked = check(translated(np.eye(4), X0 + 0.2 * d - [0, 0, 0.1]))  # the statuette where that line ends
     assert "right" in blocked and blocked["right"] @ d < 0.9 * distance_
+
+
+class _Pocket:
+    """A world (the interface :func:`queries._retreats` uses) that is free where the right
+    hand's grasp frame is, measured from p0: a block round it below 1.5 cm up (no
+    sideways move beyond 5 mm there) and a roof 3 cm up (within 5 cm sideways): no
+    straight line leaves it, a rise and then a level line do."""
+
+    world, certified = SimpleNamespace(object=None), False
+
+    def __init__(self, kin: Kinematics, frame: int, p0: np.ndarray):
+        self.kin, self.frame, self.p0 = kin, frame, p0
+
+    def is_free(self, q: np.ndarray, scale: float = 1.0) -> bool:
+        d = self.kin.fk(q, self.frame)[:3, 3] - self.p0
+        up, side = d[2], np.linalg.norm(d[:2])
+        return not (up < 0.015 and side > 0.005) and not (up > 0.03 and side < 0.05)
+
+    def segment_free(self, q0, q1, resolution, min_steps=1, limit=None) -> bool:
+        return all(self.is_free(q0 + t * (q1 - q0)) for t in segment_samples(q0, q1, resolution, min_steps)[:limit])
+
+
+def test_a_hand_no_straight_line_frees_rises_first_then_backs_out(problem, single):
+    """From a pocket (:class:`_Pocket`) the right hand rises ``retreat_lift`` straight up,
+    then backs out level by ``retreat_distance``, every waypoint and segment free; without
+    the rise (``retreat_lift`` 0) no line of the right hand gets out."""
+    robot, kin = problem.robot, Kinematics(problem.robot)
+    q, h = single[1].q_closed, robot.hands["right"]
+    p0 = kin.fk(q, h.grasp_frame)[:3, 3]
+    pocket = _Pocket(kin, h.grasp_frame, p0)
+    assert pocket.is_free(q)
+
+    def right_line(**options):
+        scratch = new_scratch(problem, **options)
+        for line in _retreats(scratch, np.random.default_rng(0), q, pocket):
+            if np.any(line[:, robot.hands["right"].arm_idx] != q[robot.hands["right"].arm_idx]):
+                return scratch, np.vstack([q[None], line])
+        return scratch, None
+
+    assert right_line(retreat_lift=0.0)[1] is None
+    scratch, line = right_line()
+    assert line is not None
+    o = scratch.options
+    assert all(scratch.segment_free(pocket, a, b) for a, b in zip(line[:-1], line[1:]))
+    p = np.array([kin.fk(x, h.grasp_frame)[:3, 3] for x in line]) - p0
+    top = int(np.argmax(np.linalg.norm(p[:, :2], axis=1) > 1e-3))  # the first waypoint that moved sideways
+    assert np.linalg.norm(p[:top, :2], axis=1).max() < 1e-3  # straight up first ...
+    assert p[top - 1, 2] == pytest.approx(o.retreat_lift, abs=1e-3)
+    out = p[-1] - p[top - 1]
+    assert np.linalg.norm(out) == pytest.approx(o.retreat_distance, abs=2e-3)  # ... then straight out
+    assert abs(out[2]) < 2e-3 and np.linalg.norm(out[:2]) > 0.1  # level, sideways
