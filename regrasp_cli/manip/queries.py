@@ -139,15 +139,15 @@ def _retreats(scratch: Scratch, rng: np.random.Generator, q: np.ndarray, world: 
     such line is free, the same lines after rising ``retreat_lift`` straight up: an open
     jaw round a block it let go, front and back, cannot back out level (its far finger
     hits the block) nor up (the cage's roof), but can rise clear of the block's top and
-    then back out (baxter_cage).  Lazily: the next hand's lines are solved only when
-    asked for."""
+    then back out (baxter_cage); ``retreat_lift`` 0: no rise.  Lazily: the next hand's
+    lines are solved only when asked for."""
     robot, o = scratch.problem.robot, scratch.options
     for hand in robot.hands:
         X_WG = scratch.kin.fk(q, robot.hands[hand].grasp_frame)
         back, home = -(X_WG[:3, :3] @ approach_axis(scratch, hand)), shoulder(scratch, hand, q) - X_WG[:3, 3]
         directions = _directions(back, home)
         line = _straight_out(scratch, rng, hand, q, X_WG, directions, world)
-        if line is None:
+        if line is None and o.retreat_lift > 0:
             X_up = X_WG.copy()
             X_up[2, 3] += o.retreat_lift
             rise = _line(scratch, rng, hand, q, X_up, world, 2)
