@@ -249,9 +249,15 @@ def finger_step(s: GsScratch, c: GsConfig, f: int, p_new: np.ndarray, n_new: np.
     return None
 
 
-def _tip_rotations(s: GsScratch, q: np.ndarray, X_WO: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) the fingertip frames' orientations in the object frame at ``q``."""
-    return np.array([X_WO[:3, :3].T @ s.kin.fk(q, s.hm.hand.tip_frames[f])[:3, :3] for f in range(len(s.hand.fingers))])
+def _tip_frames(s: GsScratch, q: np.ndarray) -> list[np.ndarray]:
+    """The fingertip frames (4, 4) in W at ``q``, finger by finger."""
+    return [s.kin.fk(q, s.hm.hand.tip_frames[f]) for f in range(len(s.hand.fingers))]
+
+
+def _tip_rotations(tips: list[np.ndarray], X_WO: np.ndarray) -> np.ndarray:
+    """(n, 3, 3) the orientations of the fingertip frames ``tips`` (4, 4 each, W) in the
+    object frame at X_WO."""
+    return np.array([X_WO[:3, :3].T @ T[:3, :3] for T in tips])
 
 
 def _touch(s: GsScratch, c_O: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -286,20 +292,19 @@ def roll(s: GsScratch, state: GsConfig, X_GO: np.ndarray,
     point that shrinks the error five- to tenfold a pass)."""
     X_a, X_b = s.X_WG @ state.X_GO, s.X_WG @ X_GO
     r = s.hand.radii[:, None]
-    frames = s.hm.hand.tip_frames
-    tips = [s.kin.fk(state.q, frames[f]) for f in range(len(s.hand.fingers))]
+    tips = _tip_frames(s, state.q)
     p_W = state.p @ X_a[:3, :3].T + X_a[:3, 3]
     points = np.array([T[:3, :3].T @ (p - T[:3, 3]) for T, p in zip(tips, p_W)])  # in the tip frames
     q = reach(s.hand, state.q, state.p @ X_b[:3, :3].T + X_b[:3, 3], rng, restarts=0, tol=ROLL_TOL / 4, kin=s.kin,
               points=points)
     if q is None:
         return "transfer ik"
-    R_a = np.array([X_a[:3, :3].T @ T[:3, :3] for T in tips])  # as _tip_rotations, from the frames above
+    R_a = _tip_rotations(tips, X_a)
     c0 = state.p + r * state.n
     c = (s.hand.tips(s.kin, q) - X_b[:3, 3]) @ X_b[:3, :3]
     p, n, _ = _touch(s, c)
     for _ in range(ROLL_PASSES):
-        phi = Rotation.from_matrix(_tip_rotations(s, q, X_b) @ R_a.transpose(0, 2, 1)).as_rotvec()
+        phi = Rotation.from_matrix(_tip_rotations(_tip_frames(s, q), X_b) @ R_a.transpose(0, 2, 1)).as_rotvec()
         mid = (state.n + n) / np.linalg.norm(state.n + n, axis=1, keepdims=True)
         p, n, off = _touch(s, c0 + r * np.cross(phi, mid))
         if off.max() > EDGE_RAD:
